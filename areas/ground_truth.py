@@ -1,0 +1,289 @@
+"""Ground truth of an area: what a perfect exploration can observe.
+
+Works for any triangle mesh, closed or not, with any winding:
+
+1. Surface samples: the mesh surface sampled uniformly, about one point per ``sample_spacing**2``
+   of area, seeded from the area's content hash so the result is reproducible.
+2. Blocked voxels: voxels whose centre lies within ``voxel_size / 2`` of the mesh. Any path of
+   6-adjacent voxel centres that crosses the surface crosses it on a segment of length
+   ``voxel_size`` between two centres, so one of those centres is within ``voxel_size / 2`` of the
+   crossing point: the flood fill cannot pass through any surface, even a zero-thickness sheet.
+   The ball of radius ``voxel_size / 2`` is inscribed in the voxel, so a blocked voxel always
+   touches the surface and free space next to a wall is not eaten away by more than one layer.
+3. Reachable free space: 6-connected flood fill from the start voxel through unblocked voxels.
+4. Observable voxels: the reachable voxels plus the surface layer a depth camera sees: voxels
+   holding surface (blocked, or holding samples) that touch a reachable voxel by a face, edge or
+   corner. Face adjacency alone would drop the voxels along concave edges and corners of the free
+   space, whose surface a camera does see; the layer still never reaches past the blocked shell
+   behind a surface, so the far side of a wall at least one voxel thick stays out. Blocked voxels
+   count as holding surface so that the layer does not depend on where the random samples fall.
+5. Perceivable surface cloud: the samples lying in that surface layer.
+
+A sample on a voxel face belongs to both voxels sharing the face (it is looked up a tiny step to
+either side along its triangle normal): on surfaces aligned with the grid, as in MAZE, every
+sample then reaches the voxel on the free side, whatever the rounding of its coordinates, and
+stays in the perceivable cloud.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import open3d as o3d
+from scipy import ndimage
+
+from areas.area import Area, GroundTruth
+from areas.cache import cache_dir
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
+
+DEFAULT_SAMPLE_SPACING = 0.025
+# Stored in each cache file; bump when the computation changes so stale files are recomputed.
+FORMAT_VERSION = 1
+# Margin on the blocking radius, as a fraction of the voxel size: distances come back in float32,
+# and a wall lying exactly on voxel faces must block the voxels touching it on both sides.
+BLOCK_RADIUS_MARGIN = 1e-3
+# Step off the surface, as a fraction of the voxel size, used to find the voxels on either side of
+# a sample; far above float64 rounding and far below any geometric detail.
+SIDE_STEP = 1e-4
+# Voxel centres are tested in blocks of BLOCK^3; blocks far from the mesh are skipped whole.
+BLOCK = 4
+QUERY_CHUNK = 1 << 21
+
+_memory_cache: dict[str, GroundTruth] = {}
+
+
+def sample_surface(
+    vertices: FloatArray,
+    triangles: npt.NDArray[np.integer],
+    spacing: float,
+    rng: np.random.Generator,
+) -> tuple[FloatArray, FloatArray]:
+    """Uniform samples of a triangle mesh surface.
+
+    Each triangle gets ``floor(area / spacing**2)`` points plus one more with probability equal to
+    the remainder, so large faces are covered evenly and the total matches the area.
+
+    Args:
+        vertices: (V, 3) metres.
+        triangles: (F, 3) vertex indices.
+        spacing: about one sample per ``spacing**2`` square metres.
+        rng: random generator.
+
+    Returns:
+        points: (N, 3) float64 samples.
+        normals: (N, 3) float64 unit normals of the sampled triangles (zero for degenerate ones),
+            oriented by the triangle winding.
+    """
+    corners = vertices[triangles]  # (F, 3, 3)
+    e1 = corners[:, 1] - corners[:, 0]
+    e2 = corners[:, 2] - corners[:, 0]
+    cross = np.cross(e1, e2)
+    twice_area = np.linalg.norm(cross, axis=1)
+    expected = 0.5 * twice_area / spacing**2
+    counts = np.floor(expected).astype(np.int64)
+    counts += rng.random(len(counts)) < (expected - counts)
+    face = np.repeat(np.arange(len(triangles)), counts)
+
+    u = rng.random(len(face))
+    v = rng.random(len(face))
+    # Fold the unit square onto the triangle to keep the distribution uniform.
+    outside = u + v > 1.0
+    u[outside] = 1.0 - u[outside]
+    v[outside] = 1.0 - v[outside]
+    points = corners[face, 0] + u[:, None] * e1[face] + v[:, None] * e2[face]
+
+    with np.errstate(invalid="ignore", divide="ignore"):
+        unit = np.where(twice_area[:, None] > 0.0, cross / twice_area[:, None], 0.0)
+    return points, unit[face]
+
+
+def _voxel_index(area: Area, points: FloatArray) -> tuple[IntArray, BoolArray]:
+    """Flat voxel indices of (N, 3) points and a (N,) mask of those inside the grid."""
+    shape = np.array(area.grid_shape)
+    ijk = np.floor((points - area.bounds_min) / area.voxel_size).astype(np.int64)
+    inside = np.all((ijk >= 0) & (ijk < shape), axis=1)
+    flat = np.ravel_multi_index(tuple(np.clip(ijk, 0, shape - 1).T), area.grid_shape)
+    return flat, inside
+
+
+def _distance_scene(area: Area) -> o3d.t.geometry.RaycastingScene:
+    """Open3D distance scene of the mesh, in the grid frame (origin at bounds_min).
+
+    Shifting the origin keeps float32 coordinates small and hence precise.
+    """
+    scene = o3d.t.geometry.RaycastingScene()
+    local = (np.asarray(area.vertices, dtype=np.float64) - area.bounds_min).astype(np.float32)
+    scene.add_triangles(
+        o3d.core.Tensor.from_numpy(local),
+        o3d.core.Tensor.from_numpy(np.ascontiguousarray(area.triangles, dtype=np.uint32)),
+    )
+    return scene
+
+
+def _distances(scene: o3d.t.geometry.RaycastingScene, points: FloatArray) -> FloatArray:
+    """(N,) unsigned distance to the mesh of (N, 3) grid-frame points, in chunks."""
+    out = np.empty(len(points), dtype=np.float64)
+    for start in range(0, len(points), QUERY_CHUNK):
+        chunk = o3d.core.Tensor.from_numpy(points[start : start + QUERY_CHUNK].astype(np.float32))
+        out[start : start + QUERY_CHUNK] = scene.compute_distance(chunk).numpy()
+    return out
+
+
+def blocked_voxels(area: Area) -> BoolArray:
+    """(nx, ny, nz) bool: voxels whose centre is within ``voxel_size / 2`` of the mesh."""
+    shape = np.array(area.grid_shape)
+    vs = area.voxel_size
+    radius = 0.5 * vs * (1.0 + BLOCK_RADIUS_MARGIN)
+    blocked = np.zeros(area.grid_shape, dtype=bool)
+    if len(area.triangles) == 0:
+        return blocked
+    scene = _distance_scene(area)
+
+    # Coarse pass: a block can hold a blocked voxel only if its centre is within the radius plus
+    # the distance from the block centre to its farthest voxel centre.
+    n_blocks = -(-shape // BLOCK)
+    blocks = np.stack(np.meshgrid(*(np.arange(n) for n in n_blocks), indexing="ij"), -1)
+    blocks = blocks.reshape(-1, 3)
+    block_centres = (blocks * BLOCK + BLOCK / 2.0) * vs
+    reach = radius + 0.5 * (BLOCK - 1) * vs * np.sqrt(3.0)
+    near = blocks[_distances(scene, block_centres) <= reach]
+
+    # Fine pass on the voxels of the blocks near the mesh.
+    offsets = np.stack(np.meshgrid(*([np.arange(BLOCK)] * 3), indexing="ij"), -1).reshape(-1, 3)
+    per_batch = max(1, QUERY_CHUNK // len(offsets))
+    for start in range(0, len(near), per_batch):
+        ijk = (near[start : start + per_batch, None, :] * BLOCK + offsets[None]).reshape(-1, 3)
+        ijk = ijk[np.all(ijk < shape, axis=1)]
+        hit = ijk[_distances(scene, (ijk + 0.5) * vs) <= radius]
+        blocked[tuple(hit.T)] = True
+    return blocked
+
+
+def compute_ground_truth(
+    area: Area, *, sample_spacing: float = DEFAULT_SAMPLE_SPACING
+) -> GroundTruth:
+    """Observable voxels and perceivable surface samples of an area (see the module docstring).
+
+    Args:
+        area: the scene; its start position must lie in an unblocked voxel.
+        sample_spacing: surface sampling spacing in metres (about one point per spacing**2).
+
+    Returns:
+        The ground truth on the area's occupancy grid.
+
+    Raises:
+        ValueError: when the start lies outside the grid or in a voxel touching the mesh.
+    """
+    vertices = np.asarray(area.vertices, dtype=np.float64)
+    triangles = np.asarray(area.triangles, dtype=np.int64)
+    rng = np.random.default_rng(int(area.content_hash[:16], 16))
+    points, normals = sample_surface(vertices, triangles, sample_spacing, rng)
+    eps = 1e-9 * max(1.0, float(np.max(np.abs(area.extent))))
+    in_bounds = np.all(
+        (points >= area.bounds_min - eps) & (points <= area.bounds_max + eps), axis=1
+    )
+    points, normals = points[in_bounds], normals[in_bounds]
+
+    blocked = blocked_voxels(area)
+    start_flat, start_inside = _voxel_index(area, area.start.position[None, :])
+    start = np.unravel_index(int(start_flat[0]), area.grid_shape)
+    if not start_inside[0] or blocked[start]:
+        raise ValueError(f"start {area.start.position} of area {area.name!r} is not in free space")
+
+    six = ndimage.generate_binary_structure(3, 1)
+    labels, _ = ndimage.label(~blocked, structure=six)
+    reachable = labels == labels[start]
+
+    step = SIDE_STEP * area.voxel_size * normals
+    side_a, inside_a = _voxel_index(area, points + step)
+    side_b, inside_b = _voxel_index(area, points - step)
+    has_surface = np.zeros(blocked.size, dtype=bool)
+    has_surface[side_a[inside_a]] = True
+    has_surface[side_b[inside_b]] = True
+
+    # Edge and corner neighbours count too: the voxels along a concave edge or corner of the free
+    # space touch no reachable voxel by a face, yet a camera sees their surface.
+    twenty_six = ndimage.generate_binary_structure(3, 3)
+    near_reachable = ndimage.binary_dilation(reachable, structure=twenty_six).ravel()
+    layer = (has_surface | blocked.ravel()) & near_reachable
+    perceivable = (inside_a & layer[side_a]) | (inside_b & layer[side_b])
+    observable = reachable | layer.reshape(area.grid_shape)
+    return GroundTruth(
+        observable=observable,
+        surface_points=points[perceivable].astype(np.float32),
+        voxel_size=area.voxel_size,
+    )
+
+
+def ground_truth_path(area: Area) -> Path:
+    """Disk cache file of an area's ground truth."""
+    return cache_dir() / "ground_truth" / f"{area.content_hash}.npz"
+
+
+def _write_atomic(path: Path, truth: GroundTruth) -> None:
+    """Write ``truth`` to ``path`` through a temporary file so readers never see a partial file."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.stem, suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            np.savez(
+                f,
+                version=np.int64(FORMAT_VERSION),
+                sample_spacing=np.float64(DEFAULT_SAMPLE_SPACING),
+                shape=np.array(truth.observable.shape, dtype=np.int64),
+                observable=np.packbits(truth.observable.ravel()),
+                surface_points=truth.surface_points,
+                voxel_size=np.float64(truth.voxel_size),
+            )
+        # mkstemp creates the file private to its owner; the cache is readable like any other file.
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def _read(path: Path, area: Area) -> GroundTruth | None:
+    """The cached ground truth at ``path``, or None if missing, unreadable or stale."""
+    try:
+        with np.load(path) as data:
+            if (
+                int(data["version"]) != FORMAT_VERSION
+                or float(data["sample_spacing"]) != DEFAULT_SAMPLE_SPACING
+                or tuple(int(n) for n in data["shape"]) != area.grid_shape
+                or float(data["voxel_size"]) != area.voxel_size
+            ):
+                return None
+            count = int(np.prod(area.grid_shape))
+            bits = np.unpackbits(data["observable"], count=count).astype(bool)
+            points = np.asarray(data["surface_points"], dtype=np.float32)
+    except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):
+        return None
+    return GroundTruth(
+        observable=bits.reshape(area.grid_shape), surface_points=points, voxel_size=area.voxel_size
+    )
+
+
+def load_ground_truth(area: Area) -> GroundTruth:
+    """The ground truth of an area, from memory, the disk cache, or computed and then cached."""
+    key = area.content_hash
+    truth = _memory_cache.get(key)
+    if truth is not None:
+        return truth
+    path = ground_truth_path(area)
+    truth = _read(path, area) if path.exists() else None
+    if truth is None:
+        truth = compute_ground_truth(area)
+        _write_atomic(path, truth)
+    _memory_cache[key] = truth
+    return truth

@@ -1,0 +1,263 @@
+"""The `flybo` command line: thin subcommands over the library."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from pydantic import ValidationError
+
+if TYPE_CHECKING:
+    from areas import Area, GroundTruth
+    from planners.api import Planner
+    from sim.config import EpisodeConfig
+    from sim.result import EpisodeResult
+
+
+class CliError(Exception):
+    """A problem with the command line's input, reported in one line."""
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (value > 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="flybo", description="Benchmark autonomous exploration planners of flying robots."
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("run", help="run one exploration episode and write its results")
+    run.add_argument("--area", required=True, help="area name (see `flybo areas`)")
+    run.add_argument("--planner", required=True, help="planner name (see `flybo planners`)")
+    run.add_argument("--seed", type=_seed, default=0, help="random seed (default 0)")
+    run.add_argument("--seconds", type=_positive, default=None,
+                     help="simulated seconds (default: the area's plateau time)")
+    run.add_argument("--preset", default="default", help="episode preset (default 'default')")
+    run.add_argument("--planner-config", default=None, metavar="JSON",
+                     help="planner settings as a JSON object")
+    run.add_argument("--out", required=True, type=Path, help="output folder (must not exist)")
+    run.add_argument("--quiet", action="store_true", help="no progress bar")
+    areas = sub.add_parser("areas", help="list areas, or import a mesh as a new one")
+    areas_sub = areas.add_subparsers(dest="areas_command")
+    areas_sub.add_parser("list", help="built-in and imported areas (the default)")
+    imp = areas_sub.add_parser("import", help="import a mesh file (OBJ, PLY, STL, OFF, GLB/GLTF, "
+                               "DAE) as an area that `flybo run --area NAME` can use")
+    imp.add_argument("file", type=Path, help="mesh file")
+    imp.add_argument("--name", required=True, help="area name: lower case, digits, hyphens")
+    imp.add_argument("--scale", type=_positive, default=1.0,
+                     help="metres per file unit, after the file's own unit (default 1)")
+    imp.add_argument("--up", default="z", choices=["x", "y", "z", "-x", "-y", "-z"],
+                     help="the file's up axis (default z)")
+    imp.add_argument("--voxel-size", type=_positive, default=0.1,
+                     help="occupancy voxel edge in metres (default 0.1)")
+    imp.add_argument("--overwrite", action="store_true", help="replace an area of that name")
+    sub.add_parser("planners", help="list the registered planners")
+    sub.add_parser("presets", help="list the episode presets")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = _parser().parse_args(argv)
+    try:
+        if args.command == "run":
+            _run(args)
+        elif args.command == "areas" and args.areas_command == "import":
+            _import_area(args)
+        elif args.command == "areas":
+            _list_areas()
+        elif args.command == "planners":
+            _list_planners()
+        elif args.command == "presets":
+            _list_presets()
+    except CliError as exc:
+        print(f"flybo: error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
+    except KeyboardInterrupt:
+        print("flybo: interrupted", file=sys.stderr)
+        raise SystemExit(130) from None
+
+
+def _list_areas() -> None:
+    from areas import area_names, load_area
+    from areas.registry import all_area_names
+
+    built_in = set(area_names())
+    for name in all_area_names():
+        area = load_area(name)
+        size = " x ".join(f"{v:.4g}" for v in area.extent)
+        kind = "built-in" if name in built_in else "imported"
+        print(f"{name:<16} {kind:<9} {size} m  plateau {area.plateau_s:g} s")
+
+
+def _import_area(args: argparse.Namespace) -> None:
+    from areas import load_ground_truth
+    from areas.importer import MeshImportError, import_mesh
+    from areas.registry import store_area
+    from areas.store import AreaStoreError
+
+    try:
+        area = import_mesh(args.file, args.name, scale=args.scale, up=args.up,
+                           voxel_size=args.voxel_size)
+        truth = load_ground_truth(area)  # checks the start and fills the cache now
+        store_area(area, overwrite=args.overwrite)
+    except (MeshImportError, AreaStoreError, ValueError) as exc:
+        raise CliError(str(exc).splitlines()[0]) from None
+    size = " x ".join(f"{v:.3g}" for v in area.extent)
+    print(f"imported {area.name}: {len(area.triangles)} faces, {size} m, "
+          f"observable volume {truth.observable_volume_m3:.1f} m³, "
+          f"start {np.round(area.start.position, 2).tolist()}, plateau {area.plateau_s:g} s")
+
+
+def _list_planners() -> None:
+    from planners.registry import planner_ids, spec
+
+    for planner_id in planner_ids():
+        print(f"{planner_id:<16} {spec(planner_id).description}")
+
+
+def _list_presets() -> None:
+    from sim.config import PRESETS
+
+    for name in sorted(PRESETS):
+        print(name)
+
+
+def _run(args: argparse.Namespace) -> None:
+    from areas import UnknownAreaError, load_area, load_ground_truth
+    from planners.registry import PlannerConfigError, UnknownPlannerError, make, spec
+    from sim.config import UnknownPresetError, preset
+
+    try:
+        area = load_area(args.area)
+        planner_spec = spec(args.planner)
+        config = preset(args.preset)
+        planner_config = json.loads(args.planner_config) if args.planner_config else {}
+        if not isinstance(planner_config, dict):
+            raise CliError("--planner-config must be a JSON object")
+        planner = make(planner_spec.id, planner_config)
+    except (UnknownAreaError, UnknownPlannerError, UnknownPresetError, PlannerConfigError) as exc:
+        raise CliError(str(exc).splitlines()[0]) from None
+    except (json.JSONDecodeError, ValidationError) as exc:
+        raise CliError(f"--planner-config: {str(exc).splitlines()[0]}") from None
+    out: Path = args.out
+    if out.exists():
+        raise CliError(f"output folder {out} already exists; choose a new --out")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    truth = load_ground_truth(area)
+    # Everything is written into a temporary sibling folder and renamed at the end, so an
+    # interrupted run never leaves a folder that looks complete.
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        result = _run_with_progress(args, area, truth, planner, planner_spec.id, config, staging)
+        payload = result.to_json()
+        (staging / "result.json").write_text(json.dumps(payload, indent=2) + "\n")
+        _write_ply(staging / "mesh.ply", result.mesh_vertices, result.mesh_triangles)
+        staging.chmod(0o755)  # mkdtemp makes it private
+        staging.rename(out)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    _print_summary(payload, out)
+
+
+def _run_with_progress(
+    args: argparse.Namespace,
+    area: Area,
+    truth: GroundTruth,
+    planner: Planner,
+    planner_id: str,
+    config: EpisodeConfig,
+    staging: Path,
+) -> EpisodeResult:
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from sim.episode import run_episode
+
+    seconds = args.seconds if args.seconds is not None else area.plateau_s
+    recording = staging / "recording.npz"
+    if args.quiet:
+        return run_episode(area, truth, planner, config, args.seed, planner_name=planner_id,
+                           preset_name=args.preset, seconds=seconds, recording_path=recording)
+    columns = (TextColumn("{task.description}"), BarColumn(),
+               TextColumn("{task.completed:>6.0f}/{task.total:.0f} s"),
+               TextColumn("V = {task.fields[volume]:7.1f} m³"), TimeElapsedColumn())
+    with Progress(*columns, transient=False) as bar:
+        task = bar.add_task(f"{area.name} · {planner_id}", total=seconds, volume=0.0)
+
+        def progress(t: float, volume: float) -> None:
+            bar.update(task, completed=t, volume=volume)
+
+        result = run_episode(area, truth, planner, config, args.seed, planner_name=planner_id,
+                             preset_name=args.preset, seconds=seconds, recording_path=recording,
+                             progress=progress)
+        bar.update(task, completed=seconds)
+    return result
+
+
+def _write_ply(path: Path, vertices: np.ndarray, triangles: np.ndarray) -> None:
+    from sim.open3d_any import o3d
+
+    mesh = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles)
+    )
+    if not o3d.io.write_triangle_mesh(str(path), mesh, write_ascii=False):
+        raise CliError(f"could not write {path}")
+
+
+def _print_summary(payload: dict[str, Any], out: Path) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    surface = payload["surface"]
+    timing = payload["planning_time_ms"]
+
+    def num(value: float | None, fmt: str) -> str:
+        return "-" if value is None else format(value, fmt)
+
+    table = Table(title=f"{payload['area']} · {payload['planner']} · seed {payload['seed']}")
+    table.add_column("metric")
+    table.add_column("value", justify="right")
+    rows = [
+        ("status", f"{payload['status']} ({payload['reason']})"),
+        ("simulated / wall", f"{payload['sim_seconds']:.0f} s / {payload['wall_seconds']:.1f} s"),
+        ("explored volume", f"{payload['explored_volume_m3']:.1f} m³"),
+        ("observable volume", f"{payload['observable_volume_m3']:.1f} m³"),
+        ("coverage", f"{payload['coverage']:.3f}"),
+        ("collisions", str(payload["collisions"])),
+        ("path length", f"{payload['path_length_m']:.1f} m"),
+        ("iterations", str(payload["iterations"])),
+        ("planning time mean / max", f"{timing['mean']:.1f} / {timing['max']:.1f} ms"),
+        (f"surface F-score @ {surface['tau_m']} m", num(surface["fscore"], ".3f")),
+        ("surface precision / recall",
+         f"{num(surface['precision'], '.3f')} / {num(surface['recall'], '.3f')}"),
+        ("surface RMSE", f"{num(surface['rmse_m'], '.4f')} m"),
+    ]
+    for key, value in rows:
+        table.add_row(key, value)
+    console = Console()
+    console.print(table)
+    console.print(f"results in {out}/ (result.json, recording.npz, mesh.ply)")

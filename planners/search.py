@@ -1,0 +1,206 @@
+"""Shared path search on the voxel grid: Dijkstra distance fields, paths and straight-line checks.
+
+All functions take voxel indices (i, j, k) on the map's grid and the grid's boolean masks, so
+any planner can reuse them with its own notion of where the vehicle may fly.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import numpy.typing as npt
+
+from sim.search_checks import segment_in_mask
+
+BoolGrid = npt.NDArray[np.bool_]
+IndexArray = npt.NDArray[np.int64]
+
+# 26-neighbourhood offsets and their lengths in voxels.
+_OFFSETS = np.array(
+    [(di, dj, dk) for di in (-1, 0, 1) for dj in (-1, 0, 1) for dk in (-1, 0, 1)
+     if (di, dj, dk) != (0, 0, 0)],
+    dtype=np.int64,
+)
+_STEP_COST = np.sqrt(np.sum(_OFFSETS**2, axis=1)).astype(np.float64)
+
+
+@numba.njit(cache=True)
+def _heap_push(keys: npt.NDArray[np.float64], vals: npt.NDArray[np.int64], size: int,
+               key: float, val: int) -> int:
+    i = size
+    keys[i] = key
+    vals[i] = val
+    while i > 0:
+        p = (i - 1) >> 1
+        if keys[p] <= keys[i]:
+            break
+        keys[p], keys[i] = keys[i], keys[p]
+        vals[p], vals[i] = vals[i], vals[p]
+        i = p
+    return size + 1
+
+
+@numba.njit(cache=True)
+def _heap_pop(keys: npt.NDArray[np.float64], vals: npt.NDArray[np.int64], size: int) -> int:
+    size -= 1
+    keys[0] = keys[size]
+    vals[0] = vals[size]
+    i = 0
+    while True:
+        left = 2 * i + 1
+        if left >= size:
+            break
+        c = left
+        if left + 1 < size and keys[left + 1] < keys[left]:
+            c = left + 1
+        if keys[i] <= keys[c]:
+            break
+        keys[c], keys[i] = keys[i], keys[c]
+        vals[c], vals[i] = vals[i], vals[c]
+        i = c
+    return size
+
+
+@numba.njit(cache=True)
+def _corner_free(passable: BoolGrid, ci: int, cj: int, ck: int, i: int, j: int, k: int) -> bool:
+    """A diagonal step may not cut a corner: every voxel of the cube it spans must be passable,
+    so that the straight segment between the two centres stays in passable voxels."""
+    for a in (ci, i):
+        for b in (cj, j):
+            for c in (ck, k):
+                if not passable[a, b, c]:
+                    return False
+    return True
+
+
+@numba.njit(cache=True)
+def _dijkstra(
+    passable: BoolGrid,
+    start: IndexArray,
+    goals: BoolGrid,
+    offsets: IndexArray,
+    step_cost: npt.NDArray[np.float64],
+    max_cost: float,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], int]:
+    """Distances in voxels from `start`; stops at the first popped voxel set in `goals`
+    (returned as a flat index, -1 if none) or when the frontier passes `max_cost`."""
+    nx, ny, nz = passable.shape
+    n_total = passable.size
+    dist = np.full(n_total, np.inf, dtype=np.float64)
+    parent = np.full(n_total, -1, dtype=np.int64)
+    done = np.zeros(n_total, dtype=np.bool_)
+    flat_passable = passable.ravel()
+    flat_goals = goals.ravel()
+    # Lazy deletion bounds pushes by the number of relaxations; grow on demand.
+    keys = np.empty(1 << 16, dtype=np.float64)
+    vals = np.empty(1 << 16, dtype=np.int64)
+    s = (start[0] * ny + start[1]) * nz + start[2]
+    dist[s] = 0.0
+    size = _heap_push(keys, vals, 0, 0.0, s)
+    while size > 0:
+        d = keys[0]
+        cur = vals[0]
+        size = _heap_pop(keys, vals, size)
+        if done[cur]:
+            continue
+        if d > max_cost:
+            break
+        done[cur] = True
+        if flat_goals[cur]:
+            return dist.reshape(passable.shape), parent, cur
+        ci = cur // (ny * nz)
+        cj = (cur // nz) % ny
+        ck = cur % nz
+        for n in range(offsets.shape[0]):
+            i = ci + offsets[n, 0]
+            j = cj + offsets[n, 1]
+            k = ck + offsets[n, 2]
+            if i < 0 or j < 0 or k < 0 or i >= nx or j >= ny or k >= nz:
+                continue
+            idx = (i * ny + j) * nz + k
+            if done[idx] or not flat_passable[idx]:
+                continue
+            if not _corner_free(passable, ci, cj, ck, i, j, k):
+                continue
+            nd = d + step_cost[n]
+            if nd < dist[idx]:
+                dist[idx] = nd
+                parent[idx] = cur
+                if size == keys.shape[0]:
+                    keys = np.concatenate((keys, np.empty_like(keys)))
+                    vals = np.concatenate((vals, np.empty_like(vals)))
+                size = _heap_push(keys, vals, size, nd, idx)
+    return dist.reshape(passable.shape), parent, -1
+
+
+class DistanceField:
+    """Shortest path lengths (metres) from one voxel through passable voxels, 26-connected.
+
+    With `goals`, the search stops at the nearest goal voxel (`nearest_goal`); distances are then
+    final only for voxels no farther than that goal.
+    """
+
+    def __init__(
+        self,
+        passable: BoolGrid,
+        start: npt.ArrayLike,
+        voxel_size: float,
+        *,
+        goals: BoolGrid | None = None,
+        max_cost_m: float = np.inf,
+    ) -> None:
+        self.shape = passable.shape
+        self.start = np.asarray(start, dtype=np.int64)
+        # The compiled search does no bounds checks: refuse what would read outside the grid.
+        if self.start.shape != (3,) or np.any(self.start < 0) or np.any(
+            self.start >= np.array(passable.shape)
+        ):
+            raise ValueError(f"start {self.start.tolist()} is outside the grid {passable.shape}")
+        if goals is not None and goals.shape != passable.shape:
+            raise ValueError(f"goals shape {goals.shape} differs from the grid {passable.shape}")
+        self.voxel_size = voxel_size
+        goal_mask = goals if goals is not None else np.zeros((1, 1, 1), dtype=np.bool_)
+        if goals is None:
+            goal_mask = np.zeros(passable.shape, dtype=np.bool_)
+        dist, self._parent, goal = _dijkstra(
+            passable, self.start, goal_mask, _OFFSETS, _STEP_COST, max_cost_m / voxel_size
+        )
+        self.dist_m = dist * voxel_size
+        self.nearest_goal: IndexArray | None = (
+            np.array(np.unravel_index(goal, self.shape), dtype=np.int64) if goal >= 0 else None
+        )
+
+    def path_to(self, goal: npt.ArrayLike) -> IndexArray:
+        """(K, 3) voxel indices from the start to `goal`; empty if unreachable."""
+        g = np.asarray(goal, dtype=np.int64)
+        if not np.isfinite(self.dist_m[g[0], g[1], g[2]]):
+            return np.zeros((0, 3), dtype=np.int64)
+        flat = int(np.ravel_multi_index(tuple(g), self.shape))
+        chain = [flat]
+        while self._parent[chain[-1]] >= 0:
+            chain.append(int(self._parent[chain[-1]]))
+        return np.stack(np.unravel_index(np.array(chain[::-1]), self.shape), axis=1)
+
+
+@numba.njit(cache=True)
+def segment_clear(mask: BoolGrid, a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> bool:
+    """True if every voxel the segment a→b (in voxel units, continuous) passes is set in `mask`:
+    the framework's own check (`sim.search_checks.segment_in_mask`), so that a path a planner
+    finds clear is one the framework flies."""
+    return segment_in_mask(mask, mask, a, b, False)
+
+
+def shortcut(path: IndexArray, mask: BoolGrid) -> IndexArray:
+    """Greedy line-of-sight simplification of a voxel path: (M, 3) with M <= K, same ends."""
+    if len(path) <= 2:
+        return path
+    centres = path.astype(np.float64) + 0.5
+    kept = [0]
+    i = 0
+    while i < len(path) - 1:
+        j = len(path) - 1
+        while j > i + 1 and not segment_clear(mask, centres[i], centres[j]):
+            j -= 1
+        kept.append(j)
+        i = j
+    return path[kept]

@@ -1,0 +1,60 @@
+"""Turning voxel paths into waypoints, and finding where the vehicle stands on the grid."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from planners.search import BoolGrid, IndexArray
+from sim.map_view import MapView
+
+
+def nearest_traversable(
+    traversable: BoolGrid, voxel: IndexArray, reach: int = 3
+) -> IndexArray | None:
+    """`voxel` if traversable, else the nearest traversable voxel within `reach` voxels."""
+    i, j, k = (int(v) for v in voxel)
+    shape = traversable.shape
+    if all(0 <= v < n for v, n in zip((i, j, k), shape, strict=True)) and traversable[i, j, k]:
+        return np.array([i, j, k], dtype=np.int64)
+    lo = np.maximum(np.array([i, j, k]) - reach, 0)
+    hi = np.minimum(np.array([i, j, k]) + reach + 1, shape)
+    if np.any(hi <= lo):
+        return None
+    sub = traversable[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
+    cells = np.argwhere(sub)
+    if len(cells) == 0:
+        return None
+    cells = cells + lo
+    best = np.argmin(np.sum((cells - np.array([i, j, k])) ** 2, axis=1))
+    return cells[best].astype(np.int64)
+
+
+def path_waypoints(
+    view: MapView,
+    path: IndexArray,
+    position: npt.NDArray[np.float64],
+    look_at: npt.NDArray[np.float64],
+) -> npt.NDArray[np.float64]:
+    """(N, 4) waypoints along a voxel path from the vehicle's `position`.
+
+    The first path voxel is dropped when it is the vehicle's own (a search may start from a
+    nearby traversable voxel instead, which is then kept). Each waypoint's yaw looks along the
+    leg that ends there, so the camera sees where the vehicle flies; the last looks at `look_at`.
+    """
+    here = view.world_to_index(np.asarray(position)[None])[0]
+    own = len(path) > 0 and bool(np.all(path[0] == here))
+    keep = path[1:] if own and len(path) > 1 else path
+    points = view.index_to_world(keep)
+    waypoints = np.zeros((len(points), 4))
+    waypoints[:, :3] = points
+    previous = np.vstack([position[None], points[:-1]])
+    legs = points - previous
+    waypoints[:, 3] = np.arctan2(legs[:, 1], legs[:, 0])
+    # A vertical or empty leg has no heading: keep the previous one.
+    short = np.linalg.norm(legs[:, :2], axis=1) < 1e-6
+    for n in np.flatnonzero(short):
+        waypoints[n, 3] = waypoints[n - 1, 3] if n > 0 else waypoints[n, 3]
+    final = look_at - points[-1]
+    waypoints[-1, 3] = float(np.arctan2(final[1], final[0]))
+    return waypoints

@@ -1,0 +1,1 @@
+"""The simulator: world, sensors, mapping, metrics, the episode runner and recordings."""

@@ -1,0 +1,150 @@
+"""Depth camera rendered by ray casting the area mesh with Open3D (Embree on the CPU).
+
+The camera sits at the vehicle centre, level, looking along body +x. Depth is z-depth (distance
+along the optical axis), not ray length, like a real depth sensor.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from pydantic import BaseModel, ConfigDict, Field
+
+from sim.geometry import FloatArray, Pose, yaw_matrix
+from sim.open3d_any import o3d
+
+# Optical frame (x right, y down, z forward) expressed in the body frame (x forward, y left, z up).
+BODY_FROM_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+
+
+class CameraConfig(BaseModel):
+    """Depth camera model; defaults are the benchmark's sensor."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    fov_h_deg: float = Field(90.0, gt=0.0, lt=180.0)
+    fov_v_deg: float = Field(73.7, gt=0.0, lt=180.0)
+    width: int = Field(160, ge=2, le=4096)
+    height: int = Field(120, ge=2, le=4096)
+    max_range_m: float = Field(5.0, gt=0.0)
+    min_range_m: float = Field(0.1, ge=0.0)
+    rate_hz: float = Field(20.0, gt=0.0)
+
+    def intrinsic_matrix(self) -> FloatArray:
+        """(3, 3) pinhole matrix K, pixel centres at integer coordinates + 0.5."""
+        fx = (self.width / 2.0) / np.tan(np.radians(self.fov_h_deg) / 2.0)
+        fy = (self.height / 2.0) / np.tan(np.radians(self.fov_v_deg) / 2.0)
+        return np.array([[fx, 0.0, self.width / 2.0], [0.0, fy, self.height / 2.0], [0, 0, 1.0]])
+
+
+@dataclass(frozen=True)
+class DepthFrame:
+    """One depth image.
+
+    Attributes:
+        time: simulated seconds.
+        depth: (H, W) float32 z-depth in metres; NaN where nothing is within range.
+        pose: the pose the image was rendered from (true pose).
+    """
+
+    time: float
+    depth: npt.NDArray[np.float32]
+    pose: Pose
+
+
+class DepthCamera:
+    """Renders z-depth images of a triangle mesh."""
+
+    def __init__(
+        self,
+        vertices: FloatArray,
+        triangles: npt.NDArray[np.int32],
+        config: CameraConfig | None = None,
+    ) -> None:
+        self.config = config or CameraConfig()
+        self._scene = o3d.t.geometry.RaycastingScene()
+        self._scene.add_triangles(
+            o3d.core.Tensor(np.ascontiguousarray(vertices, dtype=np.float32)),
+            o3d.core.Tensor(np.ascontiguousarray(triangles, dtype=np.uint32)),
+        )
+        k = self.config.intrinsic_matrix()
+        u, v = np.meshgrid(
+            np.arange(self.config.width) + 0.5, np.arange(self.config.height) + 0.5
+        )
+        # Unnormalised optical-frame directions with z = 1, so a z-depth scales them to points.
+        self._pixel_dirs_optical = np.stack(
+            [(u - k[0, 2]) / k[0, 0], (v - k[1, 2]) / k[1, 1], np.ones_like(u)], axis=-1
+        ).reshape(-1, 3)
+        self._inv_norm = 1.0 / np.linalg.norm(self._pixel_dirs_optical, axis=1)
+        self._strided: dict[int, tuple[FloatArray, FloatArray]] = {
+            1: (self._pixel_dirs_optical, self._inv_norm)
+        }
+        self._unit: dict[int, FloatArray] = {}
+
+    def distance_to_surface(self, point: FloatArray) -> float:
+        """Distance in metres from `point` (3,) to the nearest scene surface."""
+        return float(self.distance_to_surface_many(np.asarray(point).reshape(1, 3))[0])
+
+    def distance_to_surface_many(self, points: npt.NDArray[np.floating]) -> FloatArray:
+        """(N,) distances in metres from points (N, 3) to the nearest scene surface."""
+        query = o3d.core.Tensor(np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3))
+        return np.asarray(self._scene.compute_distance(query).numpy(), dtype=np.float64)
+
+    def world_from_optical(self, yaw: float) -> FloatArray:
+        """(3, 3) rotation taking optical-frame vectors to world vectors."""
+        return yaw_matrix(yaw) @ BODY_FROM_OPTICAL
+
+    def _directions(self, stride: int) -> tuple[FloatArray, FloatArray]:
+        """Optical-frame directions (z = 1) and their inverse norms of every `stride`-th row and
+        column, C order."""
+        if stride not in self._strided:
+            cfg = self.config
+            keep = np.zeros((cfg.height, cfg.width), dtype=bool)
+            keep[::stride, ::stride] = True
+            flat = keep.reshape(-1)
+            self._strided[stride] = (self._pixel_dirs_optical[flat], self._inv_norm[flat])
+        return self._strided[stride]
+
+    def _unit_directions(self, stride: int) -> FloatArray:
+        """(P, 3) unit optical-frame directions of the pixels kept at `stride`."""
+        if stride not in self._unit:
+            dirs, inv_norm = self._directions(stride)
+            self._unit[stride] = dirs * inv_norm[:, None]
+        return self._unit[stride]
+
+    def render(self, pose: Pose, time: float = 0.0, stride: int = 1) -> DepthFrame:
+        """Ray-cast one depth image from `pose`; with `stride` > 1 only every stride-th row and
+        column (an image of ceil(H / stride) x ceil(W / stride) pixels)."""
+        cfg = self.config
+        _, inv_norm = self._directions(stride)
+        unit_dirs = self._unit_directions(stride) @ self.world_from_optical(pose.yaw).T
+        rays = np.empty((unit_dirs.shape[0], 6), dtype=np.float32)
+        rays[:, :3] = pose.position
+        rays[:, 3:] = unit_dirs
+        t_hit = self._scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+        depth = (t_hit * inv_norm).astype(np.float32)  # ray length -> z-depth
+        depth[(depth > cfg.max_range_m) | (depth < cfg.min_range_m)] = np.nan
+        shape = (-(-cfg.height // stride), -(-cfg.width // stride))
+        return DepthFrame(time=time, depth=depth.reshape(shape), pose=pose)
+
+    def back_project(
+        self, depth: npt.NDArray[np.float32], pose: Pose, stride: int = 1
+    ) -> tuple[FloatArray, npt.NDArray[np.bool_]]:
+        """World endpoints of every pixel's ray and whether it returned.
+
+        Args:
+            depth: an image rendered with the same `stride`.
+
+        Returns:
+            endpoints: (P, 3) world points; pixels without a return end at the maximum range.
+            hit: (P,) True where the pixel measured a surface.
+        """
+        dirs, _ = self._directions(stride)
+        z = depth.reshape(-1).astype(np.float64)
+        hit = np.isfinite(z)
+        z = np.where(hit, z, self.config.max_range_m)
+        points_optical = dirs * z[:, None]
+        endpoints = points_optical @ self.world_from_optical(pose.yaw).T + pose.position
+        return endpoints, hit

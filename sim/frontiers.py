@@ -1,0 +1,321 @@
+"""Frontier voxels of an `OccupancyMap`, kept up to date incrementally, and their clusters.
+
+A frontier voxel is a FREE voxel with at least one UNKNOWN 6-neighbour; voxels outside the grid
+do not count as unknown. `FrontierTracker` subscribes to the map's dirty boxes (see
+`sim.occupancy.DirtyBoxSubscription`), so it can be refreshed independently of other consumers
+such as `sim.clearance.TraversabilityTracker`: each owns its subscription and `update()` costs
+time proportional to the box of voxels whose state changed since its previous update.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+import numpy.typing as npt
+
+from sim.geometry import FloatArray
+from sim.occupancy import IndexArray, IndexBox, OccupancyMap, StateGrid, VoxelState
+
+BoolGrid = npt.NDArray[np.bool_]
+
+_UNKNOWN = np.uint8(VoxelState.UNKNOWN)
+_FREE = np.uint8(VoxelState.FREE)
+
+
+@dataclass(frozen=True, eq=False)
+class FrontierCluster:
+    """A connected group of frontier voxels.
+
+    Attributes:
+        id: position in the list `FrontierTracker.clusters` returned; not stable across calls.
+        indices: (K, 3) int64 voxel indices, in C order.
+        centroid: (3,) float64 mean of the voxel centres, world metres.
+        normal: (3,) float64 unit vector, the normalised mean over the voxels of the unit
+            direction toward their UNKNOWN 6-neighbours: it points from known free space into
+            the unknown. Zero in the rare case where those directions cancel out.
+        size: K.
+    """
+
+    id: int
+    indices: IndexArray
+    centroid: FloatArray
+    normal: FloatArray
+    size: int
+
+
+@numba.njit(cache=True)
+def _frontier_box(
+    state: StateGrid, frontier: BoolGrid,
+    lo0: int, lo1: int, lo2: int, hi0: int, hi1: int, hi2: int,
+) -> int:
+    """Recompute `frontier` on the half-open box [lo, hi) from `state`.
+
+    state: (nx, ny, nz) uint8 `VoxelState`; frontier: (nx, ny, nz) bool, written in the box.
+    Returns the change in the number of frontier voxels.
+    """
+    nx, ny, nz = state.shape
+    delta = 0
+    for i in range(lo0, hi0):
+        for j in range(lo1, hi1):
+            for k in range(lo2, hi2):
+                f = False
+                if state[i, j, k] == _FREE:
+                    f = (
+                        (i > 0 and state[i - 1, j, k] == _UNKNOWN)
+                        or (i + 1 < nx and state[i + 1, j, k] == _UNKNOWN)
+                        or (j > 0 and state[i, j - 1, k] == _UNKNOWN)
+                        or (j + 1 < ny and state[i, j + 1, k] == _UNKNOWN)
+                        or (k > 0 and state[i, j, k - 1] == _UNKNOWN)
+                        or (k + 1 < nz and state[i, j, k + 1] == _UNKNOWN)
+                    )
+                delta += int(f) - int(frontier[i, j, k])
+                frontier[i, j, k] = f
+    return delta
+
+
+@numba.njit(cache=True)
+def _unknown_directions(state: StateGrid, indices: IndexArray) -> FloatArray:
+    """(K, 3) unit direction from each voxel toward its UNKNOWN 6-neighbours (zero if none).
+
+    state: (nx, ny, nz) uint8 `VoxelState`; indices: (K, 3) int64 in-grid voxels.
+    """
+    nx, ny, nz = state.shape
+    out = np.zeros((indices.shape[0], 3))
+    for p in range(indices.shape[0]):
+        i, j, k = indices[p, 0], indices[p, 1], indices[p, 2]
+        x = 0.0
+        y = 0.0
+        z = 0.0
+        if i > 0 and state[i - 1, j, k] == _UNKNOWN:
+            x -= 1.0
+        if i + 1 < nx and state[i + 1, j, k] == _UNKNOWN:
+            x += 1.0
+        if j > 0 and state[i, j - 1, k] == _UNKNOWN:
+            y -= 1.0
+        if j + 1 < ny and state[i, j + 1, k] == _UNKNOWN:
+            y += 1.0
+        if k > 0 and state[i, j, k - 1] == _UNKNOWN:
+            z -= 1.0
+        if k + 1 < nz and state[i, j, k + 1] == _UNKNOWN:
+            z += 1.0
+        norm = math.sqrt(x * x + y * y + z * z)
+        if norm > 0.0:
+            out[p, 0] = x / norm
+            out[p, 1] = y / norm
+            out[p, 2] = z / norm
+    return out
+
+
+@numba.njit(cache=True)
+def _find(parent: IndexArray, p: int) -> int:
+    """Root of p in the union-find forest `parent`, compressing the path on the way."""
+    root = p
+    while parent[root] != root:
+        root = parent[root]
+    while parent[p] != root:
+        nxt = parent[p]
+        parent[p] = root
+        p = nxt
+    return root
+
+
+@numba.njit(cache=True)
+def _connected(
+    indices: IndexArray, key: IndexArray, lookup: npt.NDArray[np.int32]
+) -> tuple[IndexArray, int]:
+    """26-connected components of a voxel set, joining only voxels with equal `key`.
+
+    indices: (K, 3) int64 distinct in-grid voxels in C order.
+    key: (K,) int64.
+    lookup: (nx, ny, nz) int32 all -1; used as scratch and left all -1, so the cost is
+        proportional to K, not to the grid.
+
+    Returns:
+        (K,) int64 labels 0 .. n-1 numbered in C order of each component's first voxel, and n.
+    """
+    nx, ny, nz = lookup.shape
+    count = indices.shape[0]
+    for p in range(count):
+        lookup[indices[p, 0], indices[p, 1], indices[p, 2]] = p
+    parent = np.arange(count)
+    for p in range(count):
+        i, j, k = indices[p, 0], indices[p, 1], indices[p, 2]
+        for a in range(max(i - 1, 0), min(i + 2, nx)):
+            for b in range(max(j - 1, 0), min(j + 2, ny)):
+                for c in range(max(k - 1, 0), min(k + 2, nz)):
+                    q = lookup[a, b, c]
+                    # Each pair is joined once, from its later voxel.
+                    if q < 0 or q >= p or key[q] != key[p]:
+                        continue
+                    rp = _find(parent, p)
+                    rq = _find(parent, q)
+                    if rp != rq:
+                        parent[max(rp, rq)] = min(rp, rq)
+    for p in range(count):
+        lookup[indices[p, 0], indices[p, 1], indices[p, 2]] = -1
+    # Each root is its component's smallest member, so numbering roots in order follows C order.
+    labels = np.empty(count, dtype=np.int64)
+    n = 0
+    for p in range(count):
+        root = _find(parent, p)
+        if root == p:
+            labels[p] = n
+            n += 1
+        else:
+            labels[p] = labels[root]
+    return labels, n
+
+
+@numba.njit(cache=True)
+def _label_boxes(indices: IndexArray, labels: IndexArray, n: int) -> tuple[IndexArray, IndexArray]:
+    """(n, 3) min and (n, 3) max voxel index of each label; indices (K, 3), labels (K,)."""
+    lo = np.full((n, 3), np.iinfo(np.int64).max)
+    hi = np.full((n, 3), -1)
+    for p in range(indices.shape[0]):
+        lab = labels[p]
+        for a in range(3):
+            lo[lab, a] = min(lo[lab, a], indices[p, a])
+            hi[lab, a] = max(hi[lab, a], indices[p, a])
+    return lo, hi
+
+
+@numba.njit(cache=True)
+def _true_indices(mask: BoolGrid, count: int) -> IndexArray:
+    """(count, 3) int64 indices of the True voxels of `mask`, in C order; count is their number."""
+    nx, ny, nz = mask.shape
+    out = np.empty((count, 3), dtype=np.int64)
+    p = 0
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                if mask[i, j, k]:
+                    out[p, 0] = i
+                    out[p, 1] = j
+                    out[p, 2] = k
+                    p += 1
+    return out
+
+
+def _cell_keys(indices: IndexArray, labels: IndexArray, n: int, cell_voxels: float) -> IndexArray:
+    """(K,) int64 key of the cell of its component each voxel falls in.
+
+    Each component's bounding box is cut into the fewest equal cells at most `cell_voxels` wide
+    per axis (one cell when the component already fits).
+
+    indices: (K, 3) voxels; labels: (K,) component of each, in [0, n).
+    """
+    lo, hi = _label_boxes(indices, labels, n)
+    extent = hi - lo + 1
+    cells = np.maximum(np.ceil(extent / cell_voxels - 1e-9), 1).astype(np.int64)
+    c = cells[labels]
+    cell = ((indices - lo[labels]) * c) // extent[labels]  # (K, 3), in [0, cells)
+    cell_id = (cell[:, 0] * c[:, 1] + cell[:, 1]) * c[:, 2] + cell[:, 2]
+    result: IndexArray = labels * int(np.prod(cells, axis=1).max()) + cell_id
+    return result
+
+
+class FrontierTracker:
+    """Frontier grid of one `OccupancyMap`, refreshed from the map's state changes.
+
+    Args:
+        occupancy: the map to follow; the tracker starts from a full computation.
+    """
+
+    def __init__(self, occupancy: OccupancyMap) -> None:
+        self._map = occupancy
+        self._subscription = occupancy.subscribe()
+        self._frontier = np.zeros(occupancy.shape, dtype=bool)
+        self._count = 0
+        self._lookup = np.full(occupancy.shape, -1, dtype=np.int32)  # scratch for clustering
+        self.full_recompute()
+
+    @property
+    def frontier(self) -> BoolGrid:
+        """(nx, ny, nz) bool, True on frontier voxels; a read-only view as of the last update."""
+        view = self._frontier.view()
+        view.setflags(write=False)
+        return view
+
+    @property
+    def count(self) -> int:
+        """Number of frontier voxels as of the last update."""
+        return self._count
+
+    def update(self) -> IndexBox | None:
+        """Recompute the frontier where the map changed since the last update.
+
+        Returns:
+            The recomputed box (the changed voxels' box grown by one voxel), or None when the
+            map did not change.
+        """
+        box = self._subscription.take()
+        if box is None:
+            return None
+        region = box.expanded(1, self._map.shape)
+        self._recompute(region)
+        return region
+
+    def full_recompute(self) -> None:
+        """Recompute the whole frontier grid."""
+        self._subscription.take()
+        self._frontier[...] = False
+        self._count = 0
+        self._recompute(IndexBox.full(self._map.shape))
+
+    def _recompute(self, region: IndexBox) -> None:
+        lo, hi = region.lo, region.hi
+        self._count += int(
+            _frontier_box(self._map.state, self._frontier,
+                          lo[0], lo[1], lo[2], hi[0], hi[1], hi[2])
+        )
+
+    def clusters(self, min_size: int = 5, max_extent_m: float = 3.0) -> list[FrontierCluster]:
+        """Connected groups of frontier voxels of the current map (updates first).
+
+        Args:
+            min_size: clusters with fewer voxels are dropped.
+            max_extent_m: components wider than this on any axis are cut into pieces no wider,
+                so that every centroid stays near its voxels.
+
+        Returns:
+            Clusters in C order of their first voxel, with ids 0, 1, ...
+        """
+        self.update()
+        if self._count == 0:
+            return []
+        indices = _true_indices(self._frontier, self._count)  # (F, 3), C order
+        components, n = _connected(indices, np.zeros(len(indices), dtype=np.int64),
+                                   self._lookup)
+        keys = _cell_keys(indices, components, n, max_extent_m / self._map.voxel_size)
+        labels, n = _connected(indices, keys, self._lookup)
+
+        sizes = np.bincount(labels, minlength=n)
+        directions = _unknown_directions(self._map.state, indices)
+        centres = self._map.index_to_world(indices)
+        mean_dir = np.stack([np.bincount(labels, directions[:, a], n) for a in range(3)], axis=1)
+        centroid = np.stack([np.bincount(labels, centres[:, a], n) for a in range(3)],
+                            axis=1) / sizes[:, None]
+        norm = np.linalg.norm(mean_dir, axis=1)
+        normal = np.zeros_like(mean_dir)
+        nonzero = norm > 1e-12
+        normal[nonzero] = mean_dir[nonzero] / norm[nonzero, None]
+
+        order = np.argsort(labels, kind="stable")  # stable: C order inside each piece
+        members = np.split(indices[order], np.cumsum(sizes)[:-1])
+        result: list[FrontierCluster] = []
+        for label in np.flatnonzero(sizes >= min_size):
+            piece = members[label]
+            piece.setflags(write=False)
+            result.append(
+                FrontierCluster(
+                    id=len(result),
+                    indices=piece,
+                    centroid=centroid[label],
+                    normal=normal[label],
+                    size=int(sizes[label]),
+                )
+            )
+        return result

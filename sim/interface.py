@@ -1,0 +1,105 @@
+"""What the episode runner and a planner exchange: context, observations and plans.
+
+The planner side of the API (the `Planner` base class and the registry) lives in `planners`;
+these types live here so that the simulator depends on no planner code.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+from sim.camera import CameraConfig
+from sim.geometry import FloatArray, Pose
+from sim.map_view import MapView
+from sim.vehicle import VehicleLimits
+
+
+class PlanOutcome(enum.StrEnum):
+    """How the previous plan ended."""
+
+    NONE = "none"  # first call of the episode
+    REACHED = "reached"  # flown to the end, or to the waypoint where the horizon ran out
+    BLOCKED = "blocked"  # rejected or cut short by the framework's collision check
+    INVALID = "invalid"  # malformed waypoints (NaN, outside the area, wrong shape)
+
+
+@dataclass(frozen=True)
+class PlannerContext:
+    """What a planner learns at reset.
+
+    Attributes:
+        area: area name.
+        bounds_min, bounds_max: (3,) explorable box, metres.
+        start: start pose.
+        limits: vehicle limits.
+        safety_radius_m: clearance the framework demands between the vehicle centre and any
+            unknown or occupied voxel centre (vehicle radius plus a margin for discretisation and
+            odometry drift); the map's traversable mask uses it.
+        camera: depth camera model.
+        rng: the planner's own seeded generator; the only randomness a planner may use.
+    """
+
+    area: str
+    bounds_min: FloatArray
+    bounds_max: FloatArray
+    start: Pose
+    limits: VehicleLimits
+    safety_radius_m: float
+    camera: CameraConfig
+    rng: np.random.Generator
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What a planner sees at each `plan` call.
+
+    Attributes:
+        time: simulated seconds since the start.
+        pose: estimated pose (odometry, with its drift).
+        velocity: (3,) m/s.
+        map: read-only occupancy map view with frontier clusters and traversability.
+        last_outcome: how the previous plan ended.
+    """
+
+    time: float
+    pose: Pose
+    velocity: FloatArray
+    map: MapView
+    last_outcome: PlanOutcome
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Waypoints to fly, or the end of the exploration.
+
+    Attributes:
+        waypoints: (N, 4) x, y, z, yaw in the world frame; the vehicle stops at each one.
+        horizon_s: ask again at the first waypoint reached after this many seconds of flight;
+            0 asks again at the first waypoint, None at the last one.
+        done: the planner has nothing left to explore; waypoints are ignored.
+        info: free-form diagnostics recorded with the iteration (numbers and strings only).
+    """
+
+    waypoints: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 4)))
+    horizon_s: float | None = None
+    done: bool = False
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def finished(cls, reason: str = "no frontier left") -> Plan:
+        return cls(done=True, info={"reason": reason})
+
+
+
+
+class PlannerLike(Protocol):
+    """What the episode runner needs of a planner."""
+
+    def reset(self, ctx: PlannerContext) -> None: ...
+
+    def plan(self, obs: Observation) -> Plan: ...

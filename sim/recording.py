@@ -1,0 +1,178 @@
+"""Run recordings: poses, map keyframes, plans and surface snapshots in one compact file.
+
+Format `flybo-recording` version 1 is a NumPy `.npz` (zip, deflate) whose arrays are listed in
+`docs/recording.md`. Variable-length sequences are stored flat with an `*_offsets` array
+(K + 1,) so that item i is `flat[offsets[i]:offsets[i + 1]]`.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+FORMAT = "flybo-recording"
+VERSION = 1
+
+
+class RecordingError(ValueError):
+    """The file is not a recording this version can read."""
+
+
+def _flatten(items: list[np.ndarray], dtype: npt.DTypeLike, width: int | None) -> tuple[
+    np.ndarray, np.ndarray
+]:
+    shape: tuple[int, ...] = (0,) if width is None else (0, width)
+    flat = np.concatenate(items).astype(dtype) if items else np.zeros(shape, dtype=dtype)
+    offsets = np.zeros(len(items) + 1, dtype=np.int64)
+    offsets[1:] = np.cumsum([len(i) for i in items]) if items else []
+    return flat, offsets
+
+
+@dataclass
+class RecordingWriter:
+    """Collects a run as it happens; `save` writes it once."""
+
+    header: dict[str, Any]
+    _pose_times: list[float] = field(default_factory=list)
+    _poses: list[np.ndarray] = field(default_factory=list)
+    _key_times: list[float] = field(default_factory=list)
+    _key_indices: list[np.ndarray] = field(default_factory=list)
+    _key_states: list[np.ndarray] = field(default_factory=list)
+    _plan_times: list[float] = field(default_factory=list)
+    _plans: list[np.ndarray] = field(default_factory=list)
+    _surface_times: list[float] = field(default_factory=list)
+    _surfaces: list[np.ndarray] = field(default_factory=list)
+    _previous_state: np.ndarray | None = None
+
+    def pose(self, time: float, position: np.ndarray, yaw: float) -> None:
+        self._pose_times.append(time)
+        self._poses.append(np.array([*position, yaw], dtype=np.float32))
+
+    def map_keyframe(self, time: float, state: npt.NDArray[np.uint8]) -> None:
+        """Store the voxels whose state changed since the previous keyframe."""
+        flat = state.reshape(-1)
+        if self._previous_state is None:
+            changed = np.flatnonzero(flat)
+        else:
+            changed = np.flatnonzero(flat != self._previous_state)
+        self._previous_state = flat.copy()
+        self._key_times.append(time)
+        self._key_indices.append(changed.astype(np.uint32))
+        self._key_states.append(flat[changed].astype(np.uint8))
+
+    def plan(self, time: float, waypoints: np.ndarray) -> None:
+        self._plan_times.append(time)
+        self._plans.append(np.asarray(waypoints, dtype=np.float32).reshape(-1, 4))
+
+    def surface(self, time: float, points: np.ndarray, voxel_m: float) -> None:
+        """Store the reconstructed surface at `time`, thinned to one point per `voxel_m` cell."""
+        pts = np.asarray(points, dtype=np.float64)
+        if len(pts):
+            cells = np.floor(pts / voxel_m).astype(np.int64)
+            cells -= cells.min(axis=0)
+            span = cells.max(axis=0) + 1
+            keys = (cells[:, 0] * span[1] + cells[:, 1]) * span[2] + cells[:, 2]
+            _, first = np.unique(keys, return_index=True)
+            pts = pts[np.sort(first)]
+        self._surface_times.append(time)
+        self._surfaces.append(pts.astype(np.float32))
+
+    def save(self, path: Path) -> None:
+        key_idx, key_off = _flatten(self._key_indices, np.uint32, None)
+        key_state, _ = _flatten(self._key_states, np.uint8, None)
+        plans, plan_off = _flatten(self._plans, np.float32, 4)
+        surf, surf_off = _flatten(self._surfaces, np.float32, 3)
+        header = {**self.header, "format": FORMAT, "version": VERSION}
+        with path.open("wb") as fh:
+            np.savez_compressed(
+                fh,
+                header=np.array(json.dumps(header)),
+                pose_times=np.array(self._pose_times, dtype=np.float64),
+                poses=np.array(self._poses, dtype=np.float32).reshape(-1, 4),
+                keyframe_times=np.array(self._key_times, dtype=np.float64),
+                keyframe_offsets=key_off,
+                keyframe_indices=key_idx,
+                keyframe_states=key_state,
+                plan_times=np.array(self._plan_times, dtype=np.float64),
+                plan_offsets=plan_off,
+                plan_waypoints=plans,
+                surface_times=np.array(self._surface_times, dtype=np.float64),
+                surface_offsets=surf_off,
+                surface_points=surf,
+            )
+
+
+class Recording:
+    """A recording read back from disk."""
+
+    def __init__(self, path: Path) -> None:
+        try:
+            data = np.load(path, allow_pickle=False)
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+            raise RecordingError(f"{path}: not a readable recording ({exc})") from exc
+        if not isinstance(data, np.lib.npyio.NpzFile):
+            raise RecordingError(f"{path}: not a recording archive")
+        try:
+            with data:
+                self._arrays = {k: data[k] for k in data.files}
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+            raise RecordingError(f"{path}: corrupt recording ({exc})") from exc
+        try:
+            header = json.loads(str(self._arrays["header"]))
+        except (KeyError, json.JSONDecodeError) as exc:
+            raise RecordingError(f"{path}: missing or corrupt header") from exc
+        if not isinstance(header, dict):
+            raise RecordingError(f"{path}: header is not an object")
+        self.header: dict[str, Any] = header
+        if self.header.get("format") != FORMAT or self.header.get("version") != VERSION:
+            raise RecordingError(
+                f"{path}: format {self.header.get('format')} v{self.header.get('version')}, "
+                f"expected {FORMAT} v{VERSION}"
+            )
+
+    def array(self, name: str) -> np.ndarray:
+        return self._arrays[name]
+
+    @property
+    def pose_times(self) -> np.ndarray:
+        return self._arrays["pose_times"]
+
+    @property
+    def poses(self) -> np.ndarray:
+        """(T, 4) x, y, z, yaw."""
+        return self._arrays["poses"]
+
+    def map_state_at(self, time: float) -> npt.NDArray[np.uint8]:
+        """(nx, ny, nz) occupancy state as of the last keyframe at or before `time`."""
+        shape = tuple(self.header["grid_shape"])
+        state = np.zeros(int(np.prod(shape)), dtype=np.uint8)
+        times, off = self._arrays["keyframe_times"], self._arrays["keyframe_offsets"]
+        idx, val = self._arrays["keyframe_indices"], self._arrays["keyframe_states"]
+        last = int(np.searchsorted(times, time, side="right"))
+        # Each keyframe's indices are unique; applying them in order reproduces the state.
+        for k in range(last):
+            state[idx[off[k]: off[k + 1]]] = val[off[k]: off[k + 1]]
+        return state.reshape(shape)
+
+    def surface_at(self, time: float) -> np.ndarray:
+        """(N, 3) reconstructed surface points of the last snapshot at or before `time`."""
+        return self._latest("surface", "surface_points", time, 3)
+
+    def plan_at(self, time: float) -> np.ndarray:
+        """(N, 4) waypoints of the last plan made at or before `time`."""
+        return self._latest("plan", "plan_waypoints", time, 4)
+
+    def _latest(self, prefix: str, flat: str, time: float, width: int) -> np.ndarray:
+        """The last item of a flat sequence stamped at or before `time`; empty before the first."""
+        times, off = self._arrays[f"{prefix}_times"], self._arrays[f"{prefix}_offsets"]
+        i = int(np.searchsorted(times, time, side="right")) - 1
+        if i < 0:
+            return np.zeros((0, width), dtype=np.float32)
+        return self._arrays[flat][off[i]: off[i + 1]]

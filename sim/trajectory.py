@@ -1,0 +1,124 @@
+"""Jerk-limited, time-parameterised trajectories through waypoints, computed with ruckig.
+
+Each leg between consecutive waypoints is a 4-DoF (x, y, z, yaw) ruckig profile from rest to rest
+with phase synchronisation, so the translation follows the straight segment exactly: the planner's
+collision-checked polyline is the path actually flown. The per-axis limits of a leg are the norm
+limits scaled by the leg's direction cosines, which bounds the norms of velocity, acceleration and
+jerk by the vehicle limits.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from ruckig import InputParameter, Result, Ruckig, Synchronization
+from ruckig import Trajectory as RuckigTrajectory
+
+from sim.geometry import FloatArray, wrap_angle
+from sim.vehicle import VehicleLimits
+
+# Ruckig rejects a zero limit; an axis that does not move gets this instead.
+_MIN_LIMIT = 1e-6
+
+
+class TrajectoryError(ValueError):
+    """The waypoints cannot be turned into a trajectory (NaN, or ruckig failed)."""
+
+
+@dataclass(frozen=True)
+class TrajectorySample:
+    """Reference state at one time.
+
+    Attributes:
+        position: (3,) m.  velocity: (3,) m/s.  acceleration: (3,) m/s².
+        yaw: rad (unwrapped).  yaw_rate: rad/s.
+    """
+
+    position: FloatArray
+    velocity: FloatArray
+    acceleration: FloatArray
+    yaw: float
+    yaw_rate: float
+
+
+class Trajectory:
+    """A sequence of rest-to-rest legs through every waypoint."""
+
+    def __init__(self, legs: list[RuckigTrajectory], waypoints: FloatArray) -> None:
+        self._legs = legs
+        self.waypoints = waypoints
+        durations = np.array([leg.duration for leg in legs], dtype=np.float64)
+        self.leg_end_times = np.cumsum(durations)
+        self.duration = float(self.leg_end_times[-1]) if legs else 0.0
+
+    @property
+    def leg_count(self) -> int:
+        return len(self._legs)
+
+    def leg_index(self, t: float) -> int:
+        """Index of the leg active at time t (clamped)."""
+        return min(int(np.searchsorted(self.leg_end_times, t, side="right")), len(self._legs) - 1)
+
+    def sample(self, t: float) -> TrajectorySample:
+        """Reference state at time t seconds from the start (clamped to [0, duration])."""
+        t = min(max(t, 0.0), self.duration)
+        i = self.leg_index(t)
+        start = self.leg_end_times[i - 1] if i > 0 else 0.0
+        pos, vel, acc = self._legs[i].at_time(min(t - start, self._legs[i].duration))
+        return TrajectorySample(
+            position=np.array(pos[:3]),
+            velocity=np.array(vel[:3]),
+            acceleration=np.array(acc[:3]),
+            yaw=float(pos[3]),
+            yaw_rate=float(vel[3]),
+        )
+
+
+def plan_trajectory(
+    start: npt.ArrayLike, waypoints: npt.ArrayLike, limits: VehicleLimits
+) -> Trajectory:
+    """Trajectory from `start` (at rest) through every waypoint, stopping at each.
+
+    Args:
+        start: (4,) x, y, z, yaw of the vehicle at rest.
+        waypoints: (N, 4) x, y, z, yaw; N >= 1. Yaw is taken the short way round.
+    """
+    start_arr = np.asarray(start, dtype=np.float64)
+    if start_arr.shape != (4,):
+        raise TrajectoryError(f"start must have shape (4,), got {start_arr.shape}")
+    wps = np.asarray(waypoints, dtype=np.float64)
+    if wps.ndim != 2 or wps.shape[1] != 4 or wps.shape[0] == 0:
+        raise TrajectoryError(f"waypoints must have shape (N, 4), got {wps.shape}")
+    if not (np.all(np.isfinite(wps)) and np.all(np.isfinite(start_arr))):
+        raise TrajectoryError("waypoints must be finite")
+    otg = Ruckig(4)
+    legs: list[RuckigTrajectory] = []
+    current = start_arr.copy()
+    for wp in wps:
+        target = wp.copy()
+        target[3] = current[3] + wrap_angle(wp[3] - current[3])
+        legs.append(_leg(otg, current, target, limits))
+        current = target
+    return Trajectory(legs, wps)
+
+
+def _leg(
+    otg: Ruckig, start: FloatArray, target: FloatArray, limits: VehicleLimits
+) -> RuckigTrajectory:
+    delta = target[:3] - start[:3]
+    length = float(np.linalg.norm(delta))
+    cosines = np.abs(delta) / length if length > 1e-9 else np.zeros(3)
+    inp = InputParameter(4)
+    inp.current_position = start.tolist()
+    inp.target_position = target.tolist()
+    inp.max_velocity = [*np.maximum(limits.v_max * cosines, _MIN_LIMIT), limits.yaw_rate_max]
+    inp.max_acceleration = [*np.maximum(limits.a_max * cosines, _MIN_LIMIT), limits.yaw_acc_max]
+    inp.max_jerk = [*np.maximum(limits.j_max * cosines, _MIN_LIMIT), limits.yaw_jerk_max]
+    inp.synchronization = Synchronization.Phase
+    traj = RuckigTrajectory(4)
+    result = otg.calculate(inp, traj)
+    if result not in (Result.Working, Result.Finished):
+        raise TrajectoryError(f"ruckig could not reach {target.tolist()}: {result}")
+    return traj

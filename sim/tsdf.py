@@ -1,0 +1,145 @@
+"""Truncated signed distance fusion of depth frames (Open3D VoxelBlockGrid on the CPU)."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+from pydantic import BaseModel, ConfigDict, Field
+
+from sim.camera import BODY_FROM_OPTICAL
+from sim.geometry import FloatArray, Pose, yaw_matrix
+from sim.open3d_any import o3c, o3d
+
+_CPU = o3c.Device("CPU:0")
+
+
+class TsdfConfig(BaseModel):
+    """TSDF voxel size and truncation (truncation = voxel_size * trunc_voxel_multiplier)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    voxel_size_m: float = Field(0.05, gt=0.0)
+    trunc_voxel_multiplier: float = Field(3.0, gt=0.0)
+    block_resolution: int = Field(8, ge=2)
+    initial_block_count: int = Field(20000, ge=100)
+    weight_threshold: float = Field(1.0, ge=0.0, description="min weight for extracted surface")
+
+
+class TsdfVolume:
+    """Fuses depth frames; extracts point clouds and meshes of the zero level set."""
+
+    def __init__(self, intrinsic: FloatArray, max_range_m: float, config: TsdfConfig) -> None:
+        self.config = config
+        self._intrinsic = o3c.Tensor(np.asarray(intrinsic, dtype=np.float64))
+        self._max_range = float(max_range_m)
+        self._grid = o3d.t.geometry.VoxelBlockGrid(
+            attr_names=("tsdf", "weight"),
+            attr_dtypes=(o3c.float32, o3c.float32),
+            attr_channels=((1), (1)),
+            voxel_size=config.voxel_size_m,
+            block_resolution=config.block_resolution,
+            block_count=config.initial_block_count,
+            device=_CPU,
+        )
+        self.frames = 0
+
+    @staticmethod
+    def extrinsic(pose: Pose) -> FloatArray:
+        """(4, 4) optical-from-world transform of a camera at `pose`."""
+        rot = yaw_matrix(pose.yaw) @ BODY_FROM_OPTICAL  # world from optical
+        ext = np.eye(4)
+        ext[:3, :3] = rot.T
+        ext[:3, 3] = -rot.T @ pose.position
+        return ext
+
+    def integrate(self, depth: npt.NDArray[np.float32], pose: Pose) -> None:
+        """Fuse one z-depth image (NaN = no return) seen from `pose`."""
+        clean = np.nan_to_num(depth, nan=0.0).astype(np.float32)
+        image = o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(clean)))
+        ext = o3c.Tensor(self.extrinsic(pose))
+        mult = self.config.trunc_voxel_multiplier
+        blocks = self._grid.compute_unique_block_coordinates(
+            image, self._intrinsic, ext, 1.0, self._max_range, mult
+        )
+        self._grid.integrate(blocks, image, self._intrinsic, ext, 1.0, self._max_range, mult)
+        self.frames += 1
+
+    def surface_points(self) -> npt.NDArray[np.float64]:
+        """(N, 3) points on the fused surface (empty before the first frame)."""
+        if self.frames == 0:
+            return np.zeros((0, 3))
+        try:
+            cloud = self._grid.extract_point_cloud(self.config.weight_threshold)
+        except RuntimeError:  # Open3D raises instead of returning an empty cloud
+            return np.zeros((0, 3))
+        return np.asarray(cloud.point.positions.numpy(), dtype=np.float64)
+
+    def mesh(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int32]]:
+        """Marching-cubes mesh of the fused surface: (V, 3) vertices and (F, 3) triangles."""
+        if self.frames == 0:
+            return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int32)
+        try:
+            mesh = self._grid.extract_triangle_mesh(self.config.weight_threshold)
+        except RuntimeError:
+            return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int32)
+        if "positions" not in mesh.vertex or "indices" not in mesh.triangle:
+            return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int32)
+        vertices = np.asarray(mesh.vertex.positions.numpy(), dtype=np.float64)
+        triangles = np.asarray(mesh.triangle.indices.numpy(), dtype=np.int32)
+        return vertices, triangles
+
+    def sdf_at(self, points: npt.NDArray[np.floating]) -> tuple[
+        npt.NDArray[np.float64], npt.NDArray[np.float32]
+    ]:
+        """Signed distance (metres) at each point, trilinear between the 8 voxel samples around
+        it, and the smallest fusion weight among those samples.
+
+        Args:
+            points: (N, 3) world points.
+
+        Returns:
+            sdf: (N,) metres, NaN where a sample is not allocated; weight: (N,) 0 there.
+        """
+        n = len(points)
+        sdf = np.zeros(n)
+        weight = np.full(n, np.inf, dtype=np.float32)
+        if self.frames == 0 or n == 0:
+            return np.full(n, np.nan), np.zeros(n, dtype=np.float32)
+        cfg = self.config
+        # Voxel (i, j, k) holds the field sampled at (i, j, k) * voxel_size.
+        scaled = np.asarray(points, dtype=np.float64) / cfg.voxel_size_m
+        base = np.floor(scaled).astype(np.int64)
+        frac = scaled - base
+        tsdf_all = self._grid.attribute("tsdf").reshape((-1,))
+        weight_all = self._grid.attribute("weight").reshape((-1,))
+        for corner in np.ndindex(2, 2, 2):
+            off = np.array(corner)
+            value, w = self._samples(base + off, tsdf_all, weight_all)
+            tri = np.prod(np.where(off == 1, frac, 1.0 - frac), axis=1)
+            sdf += tri * value
+            weight = np.minimum(weight, w)
+        unseen = ~(weight > 0)
+        sdf[unseen] = np.nan
+        weight[unseen] = 0.0
+        return sdf * cfg.voxel_size_m * cfg.trunc_voxel_multiplier, weight
+
+    def _samples(
+        self, vox: npt.NDArray[np.int64], tsdf_all: o3c.Tensor, weight_all: o3c.Tensor
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float32]]:
+        """Normalised TSDF and weight of voxels (N, 3); 0 and 0 where unallocated."""
+        res = self.config.block_resolution
+        block = np.floor_divide(vox, res)
+        local = vox - block * res
+        buf, found = self._grid.hashmap().find(o3c.Tensor(block.astype(np.int32)))
+        hit = np.flatnonzero(found.numpy().astype(bool))
+        value = np.zeros(len(vox))
+        w = np.zeros(len(vox), dtype=np.float32)
+        if len(hit):
+            # Within a block, voxels are laid out x fastest, then y, then z.
+            flat = buf.numpy().astype(np.int64)[hit] * res**3 + (
+                (local[hit, 2] * res + local[hit, 1]) * res + local[hit, 0]
+            )
+            index = o3c.Tensor(flat)
+            value[hit] = tsdf_all[index].numpy()
+            w[hit] = weight_all[index].numpy()
+        return value, w

@@ -1,0 +1,132 @@
+"""The physical world: the area mesh as a static pybullet body and the vehicle as a rigid sphere.
+
+A position controller (feed-forward acceleration plus PD on position and velocity, gravity
+compensated) pushes the sphere along the reference trajectory at the physics rate. Any contact
+between the sphere and the scene is a collision. Yaw is not simulated dynamically: a level MAV's
+yaw loop is much faster than its translation, so the body takes the reference yaw.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from pydantic import BaseModel, ConfigDict, Field
+
+from sim.quiet import quiet_native_output
+
+with quiet_native_output():  # pybullet prints its build time on import
+    import pybullet
+
+from sim.geometry import FloatArray
+from sim.trajectory import TrajectorySample
+from sim.vehicle import VehicleLimits
+
+GRAVITY = 9.81
+
+
+class PhysicsConfig(BaseModel):
+    """Physics and control rates and gains."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    rate_hz: float = Field(100.0, ge=100.0, description="physics and control rate")
+    kp: float = Field(36.0, gt=0.0, description="1/s², position gain")
+    kd: float = Field(12.0, gt=0.0, description="1/s, velocity gain (critical damping)")
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A collision: where and when the sphere touched the scene.
+
+    Attributes:
+        time: simulated seconds.  position: (3,) sphere centre, m.  depth: penetration, m.
+    """
+
+    time: float
+    position: FloatArray
+    depth: float
+
+
+class World:
+    """One pybullet DIRECT client holding the scene and the vehicle."""
+
+    def __init__(
+        self,
+        vertices: FloatArray,
+        triangles: npt.NDArray[np.int32],
+        start_position: FloatArray,
+        limits: VehicleLimits,
+        config: PhysicsConfig | None = None,
+    ) -> None:
+        self.config = config or PhysicsConfig()
+        self.limits = limits
+        self.dt = 1.0 / self.config.rate_hz
+        self._client = pybullet.connect(pybullet.DIRECT)
+        cid = self._client
+        pybullet.setGravity(0.0, 0.0, -GRAVITY, physicsClientId=cid)
+        pybullet.setPhysicsEngineParameter(
+            fixedTimeStep=self.dt, numSubSteps=1, physicsClientId=cid
+        )
+        scene_shape = pybullet.createCollisionShape(
+            pybullet.GEOM_MESH,
+            vertices=np.asarray(vertices, dtype=np.float64).tolist(),
+            indices=np.asarray(triangles, dtype=np.int32).reshape(-1).tolist(),
+            flags=pybullet.GEOM_FORCE_CONCAVE_TRIMESH,
+            physicsClientId=cid,
+        )
+        self._scene = pybullet.createMultiBody(
+            baseMass=0.0, baseCollisionShapeIndex=scene_shape, physicsClientId=cid
+        )
+        sphere = pybullet.createCollisionShape(
+            pybullet.GEOM_SPHERE, radius=limits.radius_m, physicsClientId=cid
+        )
+        self._body = pybullet.createMultiBody(
+            baseMass=limits.mass_kg,
+            baseCollisionShapeIndex=sphere,
+            basePosition=np.asarray(start_position, dtype=np.float64).tolist(),
+            physicsClientId=cid,
+        )
+        pybullet.changeDynamics(
+            self._body, -1, linearDamping=0.0, angularDamping=0.0, physicsClientId=cid
+        )
+        self.time = 0.0
+        self.position = np.asarray(start_position, dtype=np.float64).copy()
+        self.velocity = np.zeros(3)
+
+    def step(self, reference: TrajectorySample) -> Contact | None:
+        """Advance one physics step tracking `reference`; the contact if the sphere touched."""
+        cfg, cid = self.config, self._client
+        accel = (
+            reference.acceleration
+            + cfg.kp * (reference.position - self.position)
+            + cfg.kd * (reference.velocity - self.velocity)
+        )
+        force = self.limits.mass_kg * (accel + np.array([0.0, 0.0, GRAVITY]))
+        pybullet.applyExternalForce(
+            self._body, -1, force.tolist(), self.position.tolist(), pybullet.WORLD_FRAME,
+            physicsClientId=cid,
+        )
+        pybullet.stepSimulation(physicsClientId=cid)
+        self.time += self.dt
+        pos, _ = pybullet.getBasePositionAndOrientation(self._body, physicsClientId=cid)
+        vel, _ = pybullet.getBaseVelocity(self._body, physicsClientId=cid)
+        self.position = np.array(pos)
+        self.velocity = np.array(vel)
+        contacts = pybullet.getContactPoints(self._body, self._scene, physicsClientId=cid)
+        touching = [c for c in contacts if c[8] <= 0.0]
+        if not touching:
+            return None
+        return Contact(self.time, self.position.copy(), float(-min(c[8] for c in touching)))
+
+    def close(self) -> None:
+        if self._client >= 0:
+            pybullet.disconnect(physicsClientId=self._client)
+            self._client = -1
+
+    def __enter__(self) -> World:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

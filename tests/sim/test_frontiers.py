@@ -1,0 +1,186 @@
+"""Frontier and traversability trackers: incremental updates against independent references."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+from scipy.spatial import cKDTree
+
+from sim.clearance import TraversabilityTracker
+from sim.frontiers import FrontierTracker
+from sim.occupancy import OccupancyMap, VoxelState
+
+BoolGrid = npt.NDArray[np.bool_]
+
+
+def reference_frontier(state: npt.NDArray[np.uint8]) -> BoolGrid:
+    """FREE voxels with an UNKNOWN 6-neighbour, by shifting a padded mask."""
+    unknown = np.pad(state == VoxelState.UNKNOWN, 1, constant_values=False)
+    near = np.zeros(state.shape, dtype=bool)
+    nx, ny, nz = state.shape
+    for axis in range(3):
+        for shift in (0, 2):
+            window = [slice(1, nx + 1), slice(1, ny + 1), slice(1, nz + 1)]
+            window[axis] = slice(shift, shift + state.shape[axis])
+            near |= unknown[tuple(window)]
+    return (state == VoxelState.FREE) & near
+
+
+def reference_traversable(m: OccupancyMap, radius_m: float) -> BoolGrid:
+    """Brute force: distance from each FREE centre to the nearest non-FREE or outside centre."""
+    shape = np.array(m.shape)
+    shell = np.argwhere(np.pad(np.zeros(m.shape, dtype=bool), 1, constant_values=True)) - 1
+    obstacles = np.concatenate([np.argwhere(m.state != VoxelState.FREE), shell])
+    free = np.argwhere(m.state == VoxelState.FREE)
+    dist, _ = cKDTree(obstacles * m.voxel_size).query(free * m.voxel_size)
+    result = np.zeros(tuple(shape), dtype=bool)
+    ok = free[dist >= radius_m - 1e-9]
+    result[ok[:, 0], ok[:, 1], ok[:, 2]] = True
+    return result
+
+
+def integrate_random(m: OccupancyMap, rng: np.random.Generator, rays: int,
+                     hit_share: float = 0.3) -> None:
+    """One batch of rays from a random origin near the grid, `hit_share` of them hits."""
+    size = np.array(m.shape) * m.voxel_size
+    origin = m.origin + rng.uniform(-0.2, size + 0.2)
+    direction = rng.normal(size=(rays, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    ends = origin + direction * rng.uniform(0.05, 1.5, size=(rays, 1))
+    m.integrate(origin, ends, rng.random(rays) < hit_share)
+
+
+def half_free_map(free_voxels: int = 5, shape: tuple[int, int, int] = (10, 10, 10),
+                  axis: int = 0) -> OccupancyMap:
+    """Voxels with index < free_voxels along `axis` FREE, the rest UNKNOWN."""
+    m = OccupancyMap((0.0, 0.0, 0.0), shape, 0.1)
+    others = [a for a in range(3) if a != axis]
+    grid = np.stack(np.meshgrid(np.arange(shape[others[0]]), np.arange(shape[others[1]]),
+                                indexing="ij"), axis=-1).reshape(-1, 2)
+    starts = np.zeros((len(grid), 3))
+    starts[:, others] = (grid + 0.5) * 0.1
+    ends = starts.copy()
+    starts[:, axis] = -0.5
+    ends[:, axis] = (free_voxels - 0.5) * 0.1
+    for start, end in zip(starts, ends, strict=True):
+        m.integrate(start, end[None], [False])
+    return m
+
+
+def test_incremental_frontier_equals_full_recompute() -> None:
+    rng = np.random.default_rng(0)
+    m = OccupancyMap((-0.7, 1.1, 0.0), (40, 36, 12), 0.1)
+    tracker = FrontierTracker(m)
+    for _ in range(60):
+        integrate_random(m, rng, int(rng.integers(1, 200)))
+        tracker.update()
+        expected = reference_frontier(m.state)
+        np.testing.assert_array_equal(tracker.frontier, expected)
+        assert tracker.count == np.count_nonzero(expected)
+    assert tracker.count > 0
+    np.testing.assert_array_equal(FrontierTracker(m).frontier, tracker.frontier)
+
+
+def test_frontier_update_is_limited_to_the_dirty_box() -> None:
+    m = half_free_map()
+    tracker = FrontierTracker(m)
+    assert tracker.update() is None
+    m.integrate([0.45, 0.45, 0.45], [[0.75, 0.45, 0.45]], [False])
+    region = tracker.update()
+    assert region is not None
+    assert (region.lo, region.hi) == ((4, 3, 3), (9, 6, 6))
+    np.testing.assert_array_equal(tracker.frontier, reference_frontier(m.state))
+
+
+def test_cluster_of_half_free_grid() -> None:
+    m = half_free_map()
+    clusters = FrontierTracker(m).clusters()
+    assert len(clusters) == 1
+    c = clusters[0]
+    assert c.id == 0 and c.size == 100 == len(c.indices)
+    assert np.all(c.indices[:, 0] == 4)
+    np.testing.assert_allclose(c.centroid, [0.45, 0.5, 0.5])
+    np.testing.assert_allclose(c.normal, [1.0, 0.0, 0.0])
+
+
+def test_wide_clusters_are_split_near_their_voxels() -> None:
+    m = half_free_map(shape=(80, 10, 10), axis=1)
+    clusters = FrontierTracker(m).clusters(max_extent_m=3.0)
+    assert len(clusters) == 3
+    assert sum(c.size for c in clusters) == 800
+    for c in clusters:
+        extent = (c.indices.max(axis=0) - c.indices.min(axis=0) + 1) * m.voxel_size
+        assert np.all(extent <= 3.0 + 1e-9)
+        np.testing.assert_allclose(c.normal, [0.0, 1.0, 0.0])
+        assert np.min(np.linalg.norm(m.index_to_world(c.indices) - c.centroid, axis=1)) < 0.1
+    assert [c.id for c in clusters] == [0, 1, 2]
+    xs = [c.centroid[0] for c in clusters]
+    assert xs == sorted(xs)
+
+
+def test_small_clusters_are_dropped_and_order_is_deterministic() -> None:
+    m = OccupancyMap((0.0, 0.0, 0.0), (70, 50, 10), 0.1)
+    m.integrate([0.05, 0.05, 0.05], [[0.35, 0.05, 0.05]], [False])  # 4 voxels
+    m.integrate([2.05, 2.05, 0.55], [[2.05, 2.85, 0.55]], [False])  # 9 voxels
+    tracker = FrontierTracker(m)
+    assert [c.size for c in tracker.clusters(min_size=5)] == [9]
+    assert [c.size for c in tracker.clusters(min_size=1)] == [4, 9]
+    rng = np.random.default_rng(1)
+    for _ in range(10):
+        integrate_random(m, rng, 100)
+    first = tracker.clusters()
+    second = tracker.clusters()
+    assert len(first) == len(second) > 1
+    for a, b in zip(first, second, strict=True):
+        assert a.id == b.id
+        np.testing.assert_array_equal(a.indices, b.indices)
+    keys = [tuple(c.indices[0]) for c in first]
+    assert keys == sorted(keys)
+    covered = np.concatenate([c.indices for c in tracker.clusters(min_size=1)])
+    assert len(covered) == tracker.count
+    assert np.all(tracker.frontier[tuple(covered.T)])
+
+
+def test_free_voxel_next_to_unknown_is_not_traversable() -> None:
+    m = half_free_map()
+    trav = TraversabilityTracker(m, radius_m=0.3).traversable
+    assert m.state[4, 5, 5] == VoxelState.FREE and m.state[5, 5, 5] == VoxelState.UNKNOWN
+    assert not trav[4, 5, 5]
+    # A centre exactly 0.3 m from the unknown and from the grid's faces still fits.
+    expected = np.zeros(m.shape, dtype=bool)
+    expected[2, 2:8, 2:8] = True
+    np.testing.assert_array_equal(trav, expected)
+    np.testing.assert_array_equal(TraversabilityTracker(m, radius_m=0.0).traversable,
+                                  m.state == VoxelState.FREE)
+
+
+@pytest.mark.parametrize("radius_m", [0.1, 0.25, 0.3])
+def test_incremental_traversability_equals_full_recompute(radius_m: float) -> None:
+    rng = np.random.default_rng(2)
+    m = OccupancyMap((0.3, -0.2, 0.0), (36, 30, 12), 0.1)
+    tracker = TraversabilityTracker(m, radius_m)
+    for _ in range(40):
+        # Few hits: each one stays occupied for the batch, and open space must remain.
+        integrate_random(m, rng, int(rng.integers(50, 400)), hit_share=0.03)
+        tracker.update()
+        np.testing.assert_array_equal(tracker.traversable, reference_traversable(m, radius_m))
+    assert tracker.traversable.any()
+    fresh = TraversabilityTracker(m, radius_m)
+    np.testing.assert_array_equal(fresh.traversable, tracker.traversable)
+    tracker.full_recompute()
+    np.testing.assert_array_equal(fresh.traversable, tracker.traversable)
+
+
+def test_trackers_share_the_map_at_their_own_pace() -> None:
+    rng = np.random.default_rng(3)
+    m = OccupancyMap((0.0, 0.0, 0.0), (32, 32, 10), 0.1)
+    frontiers = FrontierTracker(m)
+    clearance = TraversabilityTracker(m, 0.2)
+    for step in range(30):
+        integrate_random(m, rng, 150)
+        frontiers.update()
+        np.testing.assert_array_equal(frontiers.frontier, reference_frontier(m.state))
+        if step % 4 == 3:
+            clearance.update()
+            np.testing.assert_array_equal(clearance.traversable, reference_traversable(m, 0.2))

@@ -1,0 +1,63 @@
+"""TSDF fusion: signed distance read-back and the recall it gives."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sim.camera import DepthCamera
+from sim.geometry import Pose
+from sim.metrics import sdf_surface_recall, surface_recall
+from sim.tsdf import TsdfConfig, TsdfVolume
+
+
+def _box(size: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """Closed box [0, size] as (8, 3) vertices and (12, 3) triangles."""
+    sx, sy, sz = size
+    v = np.array([[x, y, z] for x in (0, sx) for y in (0, sy) for z in (0, sz)], dtype=float)
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    tris = [t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))]
+    return v, np.array(tris, dtype=np.int32)
+
+
+@pytest.fixture(scope="module")
+def fused() -> tuple[TsdfVolume, np.ndarray]:
+    vertices, triangles = _box((4.0, 3.0, 2.5))
+    camera = DepthCamera(vertices, triangles)
+    volume = TsdfVolume(camera.config.intrinsic_matrix(), 5.0, TsdfConfig())
+    for yaw in np.arange(0.0, 2 * np.pi, 0.3):
+        pose = Pose(np.array([2.0, 1.5, 1.25]), float(yaw))
+        volume.integrate(camera.render(pose).depth, pose)
+    # Points on the x = 4 wall, away from edges the level camera cannot see.
+    rng = np.random.default_rng(0)
+    wall = np.column_stack([np.full(500, 4.0), rng.uniform(0.5, 2.5, 500),
+                            rng.uniform(0.8, 1.7, 500)])
+    return volume, wall
+
+
+def test_sdf_is_zero_on_the_surface_and_signed_off_it(fused: tuple[TsdfVolume, np.ndarray]) -> None:
+    volume, wall = fused
+    sdf, weight = volume.sdf_at(wall)
+    assert np.all(weight >= 1.0)
+    assert np.max(np.abs(sdf)) < 0.02
+    inside, _ = volume.sdf_at(wall - [0.05, 0.0, 0.0])  # 5 cm in front of the wall, seen side
+    assert np.all(inside > 0.02)
+    assert np.median(inside) == pytest.approx(0.05, abs=0.01)
+
+
+def test_unobserved_points_have_no_weight(fused: tuple[TsdfVolume, np.ndarray]) -> None:
+    volume, _ = fused
+    sdf, weight = volume.sdf_at(np.array([[50.0, 50.0, 50.0]]))
+    assert np.isnan(sdf[0]) and weight[0] == 0.0
+
+
+def test_sdf_recall_agrees_with_point_recall(fused: tuple[TsdfVolume, np.ndarray]) -> None:
+    volume, wall = fused
+    sdf, weight = volume.sdf_at(wall)
+    by_sdf = sdf_surface_recall(sdf, weight, 0.05, volume.config.weight_threshold)
+    by_points = surface_recall(volume.surface_points(), wall, 0.05)
+    assert by_sdf == pytest.approx(by_points, abs=0.01)
+    assert by_sdf > 0.99
+    # Far from any surface: not recalled.
+    off, off_w = volume.sdf_at(wall - [1.0, 0.0, 0.0])
+    assert sdf_surface_recall(off, off_w, 0.05, 1.0) == 0.0

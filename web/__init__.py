@@ -1,0 +1,1 @@
+"""What a browser sees: leaderboard pages, plots and the 3D replay."""

@@ -1,0 +1,1 @@
+"""Celery app and tasks that run episodes, and the sandbox for uploaded planners."""
