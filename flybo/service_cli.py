@@ -1,0 +1,258 @@
+"""`flybo serve`, `worker`, `tokens` and the HTTP client commands `submit`, `jobs`, `results`."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import subprocess
+import sys
+import time
+from typing import Any
+
+COMMANDS = ("serve", "worker", "tokens", "submit", "jobs", "results")
+DEFAULT_SERVER = "http://127.0.0.1:8000"
+
+
+def _error(message: str) -> Exception:
+    from flybo.cli import CliError
+
+    return CliError(message)
+
+
+def add_service_commands(sub: Any) -> None:
+    serve = sub.add_parser("serve", help="the service on this machine: API, web pages and a "
+                                         "worker, on SQLite and a local broker by default")
+    serve.add_argument("--host", default="127.0.0.1")
+    serve.add_argument("--port", type=int, default=8000)
+    serve.add_argument("--workers", type=int, default=1,
+                       help="worker processes to start beside the API (default 1; 0: none)")
+    serve.add_argument("--demo", action="store_true",
+                       help="create a 'demo' user and submit a short MAZE + Classic job")
+    worker = sub.add_parser("worker", help="a Celery worker that runs queued runs")
+    worker.add_argument("--concurrency", type=int, default=1,
+                        help="runs at once in this worker (default 1)")
+    worker.add_argument("--loglevel", default="INFO")
+    tokens = sub.add_parser("tokens", help="API tokens")
+    tokens_sub = tokens.add_subparsers(dest="tokens_command", required=True)
+    create = tokens_sub.add_parser("create", help="create a token (and the user if new)")
+    create.add_argument("--user", required=True, help="user name")
+    create.add_argument("--admin", action="store_true", help="the user may manage any job")
+
+    def client(parser: argparse.ArgumentParser) -> None:
+        parser.add_argument("--server", default=os.environ.get("FLYBO_SERVER", DEFAULT_SERVER),
+                            help="service URL (env FLYBO_SERVER)")
+        parser.add_argument("--token", default=os.environ.get("FLYBO_TOKEN"),
+                            help="API token (env FLYBO_TOKEN)")
+
+    submit = sub.add_parser("submit", help="submit a job to a service")
+    client(submit)
+    submit.add_argument("--planner", required=True)
+    submit.add_argument("--areas", required=True, help="comma-separated area names")
+    submit.add_argument("--runs", type=int, default=1, help="runs per area (default 1)")
+    submit.add_argument("--seconds", type=float, default=None,
+                        help="simulated seconds (default: each area's plateau time)")
+    submit.add_argument("--preset", default="default")
+    submit.add_argument("--wait", action="store_true", help="wait with a progress bar")
+    jobs = sub.add_parser("jobs", help="list jobs, or show one (and wait for it)")
+    client(jobs)
+    jobs.add_argument("job_id", nargs="?", type=int)
+    jobs.add_argument("--wait", action="store_true", help="wait for the job to end")
+    results = sub.add_parser("results", help="the leaderboard of a service")
+    client(results)
+    results.add_argument("--preset", default="default")
+    results.add_argument("--area", default=None)
+
+
+def run_service_command(args: argparse.Namespace) -> None:
+    {"serve": _serve, "worker": _worker, "tokens": _tokens, "submit": _submit, "jobs": _jobs,
+     "results": _results}[args.command](args)
+
+
+# -- local commands ---------------------------------------------------------------------------
+
+def _settings() -> Any:
+    from pydantic import ValidationError
+
+    from server.settings import load_settings
+
+    try:
+        return load_settings()
+    except ValidationError as exc:
+        problems = "; ".join(str(e["msg"]) for e in exc.errors())
+        raise _error(f"invalid FLYBO_* settings: {problems}") from None
+
+
+def _migrated(settings: Any) -> Any:
+    from server.db import make_engine, make_session_factory
+    from server.migrate import upgrade
+
+    engine = make_engine(settings.db_url)
+    try:
+        upgrade(engine)
+    except Exception as exc:
+        raise _error(f"cannot reach or migrate the database {engine.url!r}: {exc}") from None
+    return make_session_factory(engine)
+
+
+def _tokens(args: argparse.Namespace) -> None:
+    from server.db import session_scope
+    from server.security import create_token
+
+    settings = _settings()
+    name = args.user.strip()
+    if not name or len(name) > 64:
+        raise _error("--user must be 1 to 64 characters")
+    with session_scope(_migrated(settings)) as session:
+        token = create_token(session, name, settings.secret_key, admin=args.admin)
+    print(token)
+
+
+def _worker(args: argparse.Namespace) -> None:
+    if args.concurrency < 1:
+        raise _error("--concurrency must be at least 1")
+    _migrated(_settings())
+    from server.queue import QUEUE
+    from worker.celery_app import app
+
+    app.worker_main(["worker", f"--concurrency={args.concurrency}", "--pool=prefork",
+                     "-Q", QUEUE, "-n", f"flybo-{os.getpid()}@%h", "--without-gossip",
+                     "--without-mingle", f"--loglevel={args.loglevel}"])
+
+
+def _serve(args: argparse.Namespace) -> None:
+    import uvicorn
+
+    from server.app import create_app
+
+    if not 0 < args.port < 65536:
+        raise _error(f"--port must be 1-65535, got {args.port}")
+    settings = _settings()
+    factory = _migrated(settings)
+    workers = [subprocess.Popen([sys.executable, "-m", "flybo", "worker"])
+               for _ in range(max(args.workers, 0))]
+    url = f"http://{args.host}:{args.port}"
+    try:
+        if args.demo:
+            _demo(factory, settings, url)
+        print(f"FLYBO is serving at {url}/  (API docs: {url}/docs; {len(workers)} worker(s); "
+              f"data in {settings.resolved_data_dir})", flush=True)
+        uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level="info")
+    finally:
+        for proc in workers:
+            proc.send_signal(signal.SIGTERM)
+        for proc in workers:
+            try:
+                proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+
+
+def _demo(factory: Any, settings: Any, url: str) -> None:
+    from sqlalchemy import select
+
+    from server.catalog import sync_builtin_planners
+    from server.db import session_scope
+    from server.jobs import create_job
+    from server.models import User
+    from server.queue import enqueue_run
+    from server.schemas import JobCreate
+    from server.security import create_token
+
+    with session_scope(factory) as session:
+        sync_builtin_planners(session)
+        token = create_token(session, "demo", settings.secret_key)
+        user = session.scalars(select(User).where(User.name == "demo")).one()
+        created = create_job(session, settings, user,
+                             JobCreate(planner="classic", areas=["maze"], runs=2, seconds=60))
+    for run_id, seconds in created.runs:
+        enqueue_run(settings, run_id, seconds)
+    print(f"demo user token: {token}\ndemo job: {url}/api/v1/jobs/{created.job.id}", flush=True)
+
+
+# -- HTTP client ------------------------------------------------------------------------------
+
+def _request(args: argparse.Namespace, method: str, path: str, *, auth: bool = False,
+             **kwargs: Any) -> Any:
+    import httpx
+
+    headers = {}
+    if auth:
+        if not args.token:
+            raise _error("an API token is needed: pass --token or set FLYBO_TOKEN "
+                         "(`flybo tokens create --user NAME` on the server prints one)")
+        headers["Authorization"] = f"Bearer {args.token}"
+    try:
+        response = httpx.request(method, args.server.rstrip("/") + "/api/v1" + path,
+                                 headers=headers, timeout=30.0, **kwargs)
+    except httpx.HTTPError as exc:
+        raise _error(f"cannot reach {args.server}: {exc}") from None
+    if response.status_code >= 400:
+        try:
+            detail = response.json().get("detail", response.text)
+        except ValueError:
+            detail = response.text
+        raise _error(f"{method} {path} answered {response.status_code}: {detail}")
+    return response.json()
+
+
+def _submit(args: argparse.Namespace) -> None:
+    body: dict[str, Any] = {"planner": args.planner, "runs": args.runs, "preset": args.preset,
+                            "areas": [a.strip() for a in args.areas.split(",") if a.strip()]}
+    if args.seconds is not None:
+        body["seconds"] = args.seconds
+    job = _request(args, "POST", "/jobs", auth=True, json=body)
+    print(f"job {job['id']}: {job['status']}, {len(job['runs'])} runs")
+    if args.wait:
+        _wait(args, job["id"])
+
+
+def _jobs(args: argparse.Namespace) -> None:
+    if args.job_id is None:
+        page = _request(args, "GET", "/jobs", params={"limit": 50})
+        for job in page["items"]:
+            print(f"{job['id']:>6}  {job['status']:<10} {job['progress'] * 100:5.1f}%  "
+                  f"{job['planner']:<16} {','.join(job['areas'])}  ({job['owner']})")
+        return
+    if args.wait:
+        _wait(args, args.job_id)
+        return
+    job = _request(args, "GET", f"/jobs/{args.job_id}")
+    _print_job(job)
+
+
+def _print_job(job: dict[str, Any]) -> None:
+    print(f"job {job['id']}: {job['status']} ({job['progress'] * 100:.1f}%), {job['planner']}, "
+          f"preset {job['preset']}")
+    for run in job["runs"]:
+        print(f"  run {run['id']:>6}  {run['area']:<14} seed {run['seed']:<3} {run['status']}")
+
+
+def _wait(args: argparse.Namespace, job_id: int) -> None:
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    final = {"succeeded", "failed", "cancelled"}
+    with Progress(TextColumn(f"job {job_id}"), BarColumn(), TextColumn("{task.percentage:>5.1f}%"),
+                  TextColumn("{task.description}"), TimeElapsedColumn()) as bar:
+        task = bar.add_task("queued", total=1.0)
+        while True:
+            job = _request(args, "GET", f"/jobs/{job_id}")
+            bar.update(task, completed=job["progress"], description=job["status"])
+            if job["status"] in final:
+                break
+            time.sleep(2.0)
+    _print_job(job)
+    if job["status"] != "succeeded":
+        raise SystemExit(1)
+
+
+def _results(args: argparse.Namespace) -> None:
+    params = {"preset": args.preset, **({"area": args.area} if args.area else {})}
+    board = _request(args, "GET", "/leaderboard", params=params)
+    print(f"preset {board['preset']}; areas: {', '.join(board['areas']) or 'none yet'}")
+    print(f"{'rank':>4}  {'planner':<18} {'areas':>5} {'coverage':>9} {'cov. rank':>9} "
+          f"{'F-score':>8}")
+    for p in board["overall"]:
+        fscore = f"{p['mean_fscore']:.3f}" if p["mean_fscore"] is not None else "-"
+        print(f"{p['rank']:>4}  {p['planner']:<18} {p['areas']:>5} {p['mean_coverage']:>9.4f} "
+              f"{p['mean_coverage_rank']:>9.2f} {fscore:>8}")

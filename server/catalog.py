@@ -1,0 +1,111 @@
+"""Rows for the built-in (and stored) areas and planners, kept in step with the registries.
+
+The registries import the simulation stack, so they are imported here only when called.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from server.models import AreaRow, PlannerRow
+
+log = logging.getLogger(__name__)
+
+
+class CatalogError(LookupError):
+    """A name that no registry knows."""
+
+
+def area_stats(area: Any) -> dict[str, Any]:
+    extent = area.bounds_max - area.bounds_min
+    info = area.info
+    return {
+        "title": info.title, "rooms": info.rooms, "levels": info.levels,
+        "complexity": info.complexity, "indoor": info.indoor,
+        "bounding_volume_m": [round(float(x), 3) for x in extent],
+        "faces": len(area.triangles),
+        "start": [*(float(x) for x in area.start.position), float(area.start.yaw)],
+    }
+
+
+def upsert_area(session: Session, area: Any, *, builtin: bool,
+                owner_id: int | None = None) -> AreaRow:
+    row = session.scalar(select(AreaRow).where(AreaRow.name == area.name))
+    values = {"builtin": builtin, "content_hash": area.content_hash,
+              "plateau_s": float(area.plateau_s), "voxel_size": float(area.voxel_size),
+              "stats": area_stats(area)}
+    if row is None:
+        row = AreaRow(name=area.name, owner_id=owner_id, **values)
+        session.add(row)
+    elif row.content_hash != area.content_hash or row.stats != values["stats"]:
+        for key, value in values.items():
+            setattr(row, key, value)
+    session.flush()
+    return row
+
+
+def ensure_area(session: Session, name: str) -> AreaRow:
+    """The row of area `name`, created from the registry on first use."""
+    row = session.scalar(select(AreaRow).where(AreaRow.name == name))
+    if row is not None:
+        return row
+    from areas.registry import UnknownAreaError, area_names, load_area
+
+    try:
+        area = load_area(name)
+    except UnknownAreaError as exc:
+        raise CatalogError(str(exc)) from None
+    return upsert_area(session, area, builtin=name in area_names())
+
+
+def sync_builtin_areas(session: Session) -> None:
+    from areas.registry import area_names, load_area
+
+    for name in area_names():
+        upsert_area(session, load_area(name), builtin=True)
+
+
+def sync_builtin_planners(session: Session) -> None:
+    from planners.registry import planner_ids, spec
+
+    for planner_id in planner_ids():
+        s = spec(planner_id)
+        row = session.scalar(select(PlannerRow).where(PlannerRow.name == s.name,
+                                                      PlannerRow.version == s.version))
+        config = s.config_model.model_json_schema()
+        defaults = s.config_model().model_dump(mode="json")
+        if row is None:
+            session.add(PlannerRow(name=s.name, version=s.version, builtin=True,
+                                   description=s.description, reference=s.reference,
+                                   config={"defaults": defaults, "schema": config}))
+        else:
+            row.description, row.reference = s.description, s.reference
+            row.config = {"defaults": defaults, "schema": config}
+    session.flush()
+
+
+def find_planner(session: Session, name: str) -> PlannerRow:
+    """`name` (newest version) or `name-vN` (that version)."""
+    base, version = name, None
+    if "-v" in name:
+        head, _, tail = name.rpartition("-v")
+        if tail.isdigit():
+            base, version = head, int(tail)
+    query = select(PlannerRow).where(PlannerRow.name == base)
+    if version is not None:
+        query = query.where(PlannerRow.version == version)
+    row = session.scalars(query.order_by(PlannerRow.version.desc())).first()
+    if row is None:
+        known = sorted({r.key for r in session.scalars(select(PlannerRow))})
+        raise CatalogError(f"unknown planner {name!r}; known: {', '.join(known) or 'none'}")
+    return row
+
+
+def preset_names() -> list[str]:
+    from sim.config import PRESETS
+
+    return sorted(PRESETS)

@@ -1,0 +1,187 @@
+"""Creating, cancelling and re-running jobs, with quotas and idempotency.
+
+Every function works inside the caller's session; the caller commits and only then enqueues the
+returned run ids, so a worker never sees a run that is not stored yet.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from datetime import timedelta
+
+from sqlalchemy import and_, exists, func, select
+from sqlalchemy.orm import Session
+
+from server.catalog import CatalogError, ensure_area, find_planner, preset_names
+from server.models import (
+    ACTIVE_STATES,
+    FailureKind,
+    Job,
+    Run,
+    RunState,
+    User,
+    utcnow,
+)
+from server.schemas import JobCreate, JobOut, RunBrief
+from server.settings import Settings
+
+
+class JobError(ValueError):
+    """The request cannot be served; `status` is the HTTP status to answer with."""
+
+    def __init__(self, status: int, message: str) -> None:
+        super().__init__(message)
+        self.status = status
+
+
+@dataclass(frozen=True)
+class Created:
+    job: Job
+    runs: list[tuple[int, float]]  # (run id, simulated seconds) to enqueue
+    replayed: bool
+
+
+def request_hash(body: JobCreate) -> str:
+    canonical = json.dumps(body.model_dump(mode="json"), sort_keys=True)
+    return hashlib.sha256(canonical.encode()).hexdigest()
+
+
+def create_job(session: Session, settings: Settings, user: User, body: JobCreate, *,
+               idempotency_key: str | None = None, rerun_of: int | None = None) -> Created:
+    digest = request_hash(body)
+    if idempotency_key is not None:
+        previous = session.scalar(select(Job).where(Job.user_id == user.id,
+                                                    Job.idempotency_key == idempotency_key))
+        if previous is not None:
+            if previous.request_hash != digest:
+                raise JobError(409, "this Idempotency-Key was used for a different request")
+            return Created(previous, [], replayed=True)
+    try:
+        planner = find_planner(session, body.planner)
+    except CatalogError as exc:
+        raise JobError(422, str(exc)) from None
+    presets = preset_names()
+    if body.preset not in presets:
+        raise JobError(422, f"unknown preset {body.preset!r}; known: {', '.join(presets)}")
+    if body.seconds is not None and body.seconds > settings.max_seconds_per_run:
+        raise JobError(422, f"seconds must be at most {settings.max_seconds_per_run:g}")
+    areas = []
+    for name in body.areas:
+        try:
+            areas.append(ensure_area(session, name))
+        except CatalogError as exc:
+            raise JobError(422, str(exc)) from None
+    n_runs = body.runs * len(areas)
+    if n_runs > settings.max_runs_per_job:
+        raise JobError(422, f"a job may have at most {settings.max_runs_per_job} runs "
+                            f"(areas x runs), this one has {n_runs}")
+    check_quotas(session, settings, user, n_runs)
+    job = Job(user_id=user.id, planner_id=planner.id, preset=body.preset, seconds=body.seconds,
+              runs_per_area=body.runs, idempotency_key=idempotency_key, request_hash=digest,
+              rerun_of_id=rerun_of)
+    session.add(job)
+    session.flush()
+    now = utcnow()
+    runs = [
+        Run(job_id=job.id, area_id=area.id, seed=seed, preset=body.preset,
+            seconds=float(body.seconds if body.seconds is not None else area.plateau_s),
+            status=RunState.QUEUED.value, enqueued_at=now)
+        for area in areas for seed in range(body.runs)
+    ]
+    session.add_all(runs)
+    session.flush()
+    return Created(job, [(r.id, r.seconds) for r in runs], replayed=False)
+
+
+def check_quotas(session: Session, settings: Settings, user: User, new_runs: int) -> None:
+    """429 when the user is over a quota. Admins have none. Jobs whose every run failed for a
+    platform reason do not count."""
+    if user.is_admin:
+        return
+    if settings.quota_jobs_per_day:
+        platform_only = ~exists().where(
+            and_(Run.job_id == Job.id,
+                 ~and_(Run.status == RunState.FAILED.value,
+                       Run.failure_kind == FailureKind.PLATFORM.value)))
+        recent = session.scalar(
+            select(func.count(Job.id)).where(
+                Job.user_id == user.id, Job.created_at >= utcnow() - timedelta(days=1),
+                ~platform_only)
+        ) or 0
+        if recent >= settings.quota_jobs_per_day:
+            raise JobError(429, f"quota reached: at most {settings.quota_jobs_per_day} jobs per "
+                                "day; try again later")
+    if settings.quota_concurrent_runs:
+        active = session.scalar(
+            select(func.count(Run.id)).join(Job).where(Job.user_id == user.id,
+                                                       Run.status.in_(ACTIVE_STATES))
+        ) or 0
+        if active + new_runs > settings.quota_concurrent_runs:
+            raise JobError(429, f"quota reached: at most {settings.quota_concurrent_runs} queued "
+                                f"or running runs at once; {active} are active and this job "
+                                f"adds {new_runs}")
+
+
+def may_manage(user: User, job: Job) -> bool:
+    return user.is_admin or job.user_id == user.id
+
+
+def cancel_job(session: Session, job: Job) -> None:
+    """Queued runs end as cancelled now; running ones are asked to stop (within seconds)."""
+    now = utcnow()
+    for run in job.runs:
+        if run.status == RunState.QUEUED.value:
+            run.status = RunState.CANCELLED.value
+            run.finished_at = now
+            run.error = "cancelled before it started"
+        elif run.status == RunState.RUNNING.value:
+            run.cancel_requested = True
+    session.flush()
+
+
+def rerun_job(session: Session, settings: Settings, user: User, job: Job) -> Created:
+    body = JobCreate(planner=job.planner.key, areas=_job_areas(job), runs=job.runs_per_area,
+                     seconds=job.seconds, preset=job.preset)
+    return create_job(session, settings, user, body, rerun_of=job.id)
+
+
+def _job_areas(job: Job) -> list[str]:
+    names: list[str] = []
+    for run in job.runs:
+        if run.area.name not in names:
+            names.append(run.area.name)
+    return names
+
+
+def job_status(job: Job) -> tuple[str, float]:
+    """The job's state and progress (0-1), derived from its runs."""
+    states = [r.status for r in job.runs]
+    if not states:
+        return RunState.SUCCEEDED.value, 1.0
+    finals = [RunState(s).final for s in states]
+    progress = sum(1.0 if f else r.progress for f, r in zip(finals, job.runs, strict=True))
+    progress /= len(states)
+    if all(finals):
+        if RunState.FAILED.value in states:
+            return RunState.FAILED.value, 1.0
+        if RunState.CANCELLED.value in states:
+            return RunState.CANCELLED.value, 1.0
+        return RunState.SUCCEEDED.value, 1.0
+    if all(s == RunState.QUEUED.value for s in states):
+        return RunState.QUEUED.value, progress
+    return RunState.RUNNING.value, progress
+
+
+def job_out(job: Job) -> JobOut:
+    status, progress = job_status(job)
+    return JobOut(
+        id=job.id, status=status, progress=round(progress, 4), planner=job.planner.key,
+        preset=job.preset, seconds=job.seconds, runs_per_area=job.runs_per_area,
+        areas=_job_areas(job), owner=job.user.name, created_at=job.created_at,
+        rerun_of=job.rerun_of_id,
+        runs=[RunBrief(id=r.id, area=r.area.name, seed=r.seed, status=r.status,
+                       progress=round(1.0 if RunState(r.status).final else r.progress, 4))
+              for r in job.runs],
+    )

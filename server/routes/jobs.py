@@ -1,0 +1,145 @@
+"""Jobs: a planner on some areas, several seeded runs each."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Header, HTTPException, Query, Response
+from sqlalchemy import func, select
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import selectinload
+
+from server.deps import SessionDep, SettingsDep, UserDep
+from server.jobs import (
+    Created,
+    JobError,
+    cancel_job,
+    create_job,
+    job_out,
+    may_manage,
+    rerun_job,
+)
+from server.models import AreaRow, Job, PlannerRow, Run, User
+from server.queue import enqueue_run
+from server.schemas import ErrorBody, JobCreate, JobOut, Page
+from server.settings import Settings
+
+router = APIRouter(prefix="/jobs", tags=["jobs"])
+
+_ERRORS: dict[int | str, dict[str, Any]] = {
+    401: {"model": ErrorBody}, 403: {"model": ErrorBody}, 404: {"model": ErrorBody}}
+
+
+def _load(session: SessionDep, job_id: int) -> Job:
+    job = session.scalar(
+        select(Job).where(Job.id == job_id).options(
+            selectinload(Job.runs).selectinload(Run.area), selectinload(Job.planner),
+            selectinload(Job.user))
+    )
+    if job is None:
+        raise HTTPException(404, f"no job with id {job_id}")
+    return job
+
+
+def _enqueue(settings: Settings, created: Created) -> None:
+    # After the commit: a worker must find the run rows. A failed enqueue is repaired by the
+    # sweeper, which re-enqueues runs that stay queued.
+    for run_id, seconds in created.runs:
+        try:
+            enqueue_run(settings, run_id, seconds)
+        except Exception:  # broker down: the run stays queued and is swept later
+            break
+
+
+@router.post("", status_code=201, response_model=JobOut,
+             responses={**_ERRORS, 409: {"model": ErrorBody}, 422: {"model": ErrorBody},
+                        429: {"model": ErrorBody}})
+def submit_job(
+    body: JobCreate,
+    session: SessionDep,
+    settings: SettingsDep,
+    user: UserDep,
+    response: Response,
+    idempotency_key: Annotated[str | None, Header(max_length=128)] = None,
+) -> JobOut:
+    try:
+        created = create_job(session, settings, user, body, idempotency_key=idempotency_key)
+        session.commit()
+    except JobError as exc:
+        session.rollback()
+        raise HTTPException(exc.status, str(exc)) from None
+    except IntegrityError:
+        # Two requests with one Idempotency-Key raced: the other one won; answer with its job.
+        session.rollback()
+        if idempotency_key is None:
+            raise
+        try:
+            created = create_job(session, settings, user, body, idempotency_key=idempotency_key)
+        except JobError as exc:
+            raise HTTPException(exc.status, str(exc)) from None
+    if created.replayed:
+        response.headers["Idempotent-Replayed"] = "true"
+    _enqueue(settings, created)
+    return job_out(_load(session, created.job.id))
+
+
+@router.get("", response_model=Page[JobOut])
+def list_jobs(
+    session: SessionDep,
+    limit: Annotated[int, Query(ge=1, le=200)] = 50,
+    offset: Annotated[int, Query(ge=0)] = 0,
+    planner: Annotated[str | None, Query(max_length=80)] = None,
+    owner: Annotated[str | None, Query(max_length=64)] = None,
+    area: Annotated[str | None, Query(max_length=40)] = None,
+) -> Page[JobOut]:
+    query = select(Job.id)
+    if planner is not None:
+        query = query.join(PlannerRow, Job.planner_id == PlannerRow.id).where(
+            PlannerRow.name == planner)
+    if owner is not None:
+        query = query.join(User, Job.user_id == User.id).where(User.name == owner)
+    if area is not None:
+        query = query.where(Job.id.in_(
+            select(Run.job_id).join(AreaRow, Run.area_id == AreaRow.id)
+            .where(AreaRow.name == area)))
+    total = session.scalar(select(func.count()).select_from(query.subquery())) or 0
+    ids = list(session.scalars(query.order_by(Job.id.desc()).limit(limit).offset(offset)))
+    jobs = session.scalars(
+        select(Job).where(Job.id.in_(ids)).order_by(Job.id.desc()).options(
+            selectinload(Job.runs).selectinload(Run.area), selectinload(Job.planner),
+            selectinload(Job.user))
+    ).all()
+    return Page[JobOut](items=[job_out(j) for j in jobs], total=total, limit=limit,
+                        offset=offset)
+
+
+@router.get("/{job_id}", response_model=JobOut, responses=_ERRORS)
+def get_job(job_id: int, session: SessionDep) -> JobOut:
+    return job_out(_load(session, job_id))
+
+
+@router.post("/{job_id}/cancel", response_model=JobOut,
+             responses={**_ERRORS, 409: {"model": ErrorBody}})
+def cancel(job_id: int, session: SessionDep, user: UserDep) -> JobOut:
+    job = _load(session, job_id)
+    if not may_manage(user, job):
+        raise HTTPException(403, "only the job's owner or an admin may cancel it")
+    cancel_job(session, job)
+    session.commit()
+    return job_out(_load(session, job_id))
+
+
+@router.post("/{job_id}/rerun", status_code=201, response_model=JobOut,
+             responses={**_ERRORS, 429: {"model": ErrorBody}})
+def rerun(job_id: int, session: SessionDep, settings: SettingsDep, user: UserDep) -> JobOut:
+    job = _load(session, job_id)
+    if not may_manage(user, job):
+        raise HTTPException(403, "only the job's owner or an admin may re-run it")
+    try:
+        created = rerun_job(session, settings, user, job)
+        session.commit()
+    except JobError as exc:
+        session.rollback()
+        raise HTTPException(exc.status, str(exc)) from None
+    _enqueue(settings, created)
+    return job_out(_load(session, created.job.id))

@@ -1,0 +1,100 @@
+"""The service's settings: one pydantic-settings class, read from `FLYBO_*` environment variables.
+
+Defaults give the embedded service: SQLite and a filesystem broker under `FLYBO_DATA_DIR`
+(default `./data`), artifacts in a local folder. Scale-out sets `FLYBO_DATABASE_URL`,
+`FLYBO_BROKER_URL` and `FLYBO_ARTIFACT_URL` (see `docs/service.md`).
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, model_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+# Known only to development setups; production refuses to start with it.
+DEVELOPMENT_SECRET = "development-only-secret-do-not-use-in-production"
+
+
+class Settings(BaseSettings):
+    """Everything the API, the workers and the CLI client are configured by."""
+
+    model_config = SettingsConfigDict(env_prefix="FLYBO_", extra="ignore")
+
+    environment: Literal["development", "production"] = "development"
+    data_dir: Path = Field(default=Path("data"), description="root of the embedded defaults")
+    database_url: str | None = Field(default=None, description="SQLAlchemy URL; default SQLite")
+    broker_url: str | None = Field(default=None, description="Celery broker; default filesystem")
+    artifact_url: str | None = Field(
+        default=None, description="file:///folder or s3://bucket/prefix; default data_dir/artifacts"
+    )
+    s3_endpoint_url: str | None = None
+    secret_key: str = Field(default=DEVELOPMENT_SECRET, description="keys the token hashes")
+
+    # Uploads.
+    max_area_upload_mib: float = Field(default=200.0, gt=0)
+
+    # Fairness: per user, 0 disables a quota.
+    quota_jobs_per_day: int = Field(default=50, ge=0)
+    quota_concurrent_runs: int = Field(default=40, ge=0)
+    max_runs_per_job: int = Field(default=200, ge=1)
+    max_seconds_per_run: float = Field(default=3600.0, gt=0)
+
+    # Workers.
+    heartbeat_interval_s: float = Field(default=3.0, gt=0)
+    heartbeat_timeout_s: float = Field(default=60.0, gt=0)
+    requeue_queued_after_s: float = Field(default=300.0, gt=0)
+    sweep_interval_s: float = Field(default=15.0, gt=0)
+    max_attempts: int = Field(default=3, ge=1)
+    # Wall-time limits per run: a floor plus a multiple of its simulated seconds.
+    run_time_limit_base_s: float = Field(default=300.0, gt=0)
+    run_time_limit_per_sim_s: float = Field(default=1.0, gt=0)
+
+    @model_validator(mode="after")
+    def _refuse_insecure_production(self) -> Settings:
+        insecure = self.secret_key == DEVELOPMENT_SECRET or len(self.secret_key) < 32
+        if self.environment == "production" and insecure:
+            raise ValueError(
+                "FLYBO_SECRET_KEY must be set to a random string of at least 32 characters "
+                "when FLYBO_ENVIRONMENT=production"
+            )
+        return self
+
+    @cached_property
+    def resolved_data_dir(self) -> Path:
+        return self.data_dir.expanduser().resolve()
+
+    @property
+    def db_url(self) -> str:
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{self.resolved_data_dir / 'flybo.sqlite'}"
+
+    @property
+    def broker(self) -> str:
+        return self.broker_url or "filesystem://"
+
+    @property
+    def broker_folder(self) -> Path:
+        """Where the filesystem broker keeps its messages (used only with `filesystem://`)."""
+        return self.resolved_data_dir / "broker"
+
+    @property
+    def artifacts(self) -> str:
+        if self.artifact_url:
+            return self.artifact_url
+        return (self.resolved_data_dir / "artifacts").as_uri()
+
+    @property
+    def max_area_upload_bytes(self) -> int:
+        return int(self.max_area_upload_mib * 1024 * 1024)
+
+    def run_time_limit_s(self, sim_seconds: float) -> float:
+        """Hard wall-time limit of one run of `sim_seconds` simulated seconds."""
+        return self.run_time_limit_base_s + self.run_time_limit_per_sim_s * sim_seconds
+
+
+def load_settings() -> Settings:
+    return Settings()

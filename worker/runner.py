@@ -1,0 +1,408 @@
+"""Running one stored run: claim it, fly it, store its results and artifacts, exactly once.
+
+- **Claim**: a conditional UPDATE moves the run from `queued` (or `running` with a dead
+  worker) to `running` with a fresh claim token. A duplicate message finds nothing to claim.
+- **Heartbeat**: a thread writes progress, the log tail and a heartbeat every few seconds, and
+  reads cancellation. The simulation thread never waits on the database.
+- **Finish**: artifacts are uploaded first, under keys unique to the attempt; then one
+  transaction stores results, series and artifact rows and sets the final state, only if the
+  claim token still matches. So a run is `succeeded` only with everything stored, and an
+  attempt that lost its claim (its worker was presumed dead) stores nothing.
+"""
+
+from __future__ import annotations
+
+import collections
+import json
+import logging
+import os
+import secrets
+import socket
+import tempfile
+import threading
+import time
+from dataclasses import dataclass
+from datetime import timedelta
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from sqlalchemy import Engine, or_, select, update
+from sqlalchemy.orm import Session, sessionmaker
+
+from server.db import make_engine, make_session_factory
+from server.models import (
+    AreaRow,
+    Artifact,
+    FailureKind,
+    Job,
+    MetricSeries,
+    PlannerRow,
+    Run,
+    RunResult,
+    RunState,
+    utcnow,
+)
+from server.settings import Settings
+from server.storage import ArtifactStore, ArtifactStoreError, open_store
+
+log = logging.getLogger(__name__)
+LOG_TAIL_LINES = 60
+
+_engines: dict[tuple[int, str], tuple[Engine, sessionmaker[Session]]] = {}
+
+
+def sessions_for(settings: Settings) -> sessionmaker[Session]:
+    """One engine per process and URL (created after a fork, never inherited)."""
+    key = (os.getpid(), settings.db_url)
+    if key not in _engines:
+        engine = make_engine(settings.db_url)
+        _engines[key] = (engine, make_session_factory(engine))
+    return _engines[key][1]
+
+
+def worker_name() -> str:
+    return f"{socket.gethostname()}-{os.getpid()}"
+
+
+class RunAbortedError(Exception):
+    """Raised from the progress callback to stop the simulation."""
+
+    def __init__(self, why: str) -> None:
+        super().__init__(why)
+        self.why = why
+
+
+@dataclass(frozen=True)
+class Claim:
+    run_id: int
+    token: str
+    attempt: int
+
+
+def claim(factory: sessionmaker[Session], settings: Settings, run_id: int) -> Claim | None:
+    """Take the run if nobody live holds it; None if it is final, held, or cancelled."""
+    token = secrets.token_hex(16)
+    now = utcnow()
+    stale = now - timedelta(seconds=settings.heartbeat_timeout_s)
+    with factory() as session:
+        result = session.execute(
+            update(Run).where(
+                Run.id == run_id, Run.cancel_requested.is_(False),
+                or_(Run.status == RunState.QUEUED.value,
+                    (Run.status == RunState.RUNNING.value) & (Run.heartbeat_at < stale)))
+            .values(status=RunState.RUNNING.value, claim_token=token,
+                    attempts=Run.attempts + 1, worker=worker_name(), started_at=now,
+                    heartbeat_at=now, progress=0.0, sim_time_s=0.0)
+        )
+        if not getattr(result, "rowcount", 0):
+            # A queued run whose cancellation came first ends here.
+            session.execute(update(Run).where(
+                Run.id == run_id, Run.status == RunState.QUEUED.value,
+                Run.cancel_requested.is_(True)).values(status=RunState.CANCELLED.value,
+                                                       finished_at=now))
+            session.commit()
+            return None
+        attempts = session.scalar(select(Run.attempts).where(Run.id == run_id)) or 1
+        session.commit()
+    return Claim(run_id, token, attempts)
+
+
+class RunLog(logging.Handler):
+    """The run's own log: every line to a file, the last ones kept for the live tail."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(logging.INFO)
+        self.path = path
+        self.file = path.open("a", encoding="utf-8")
+        self.tail: collections.deque[str] = collections.deque(maxlen=LOG_TAIL_LINES)
+        self.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+        self.lock_tail = threading.Lock()
+
+    def emit(self, record: logging.LogRecord) -> None:
+        line = self.format(record)
+        self.file.write(line + "\n")
+        self.file.flush()
+        with self.lock_tail:
+            self.tail.append(line)
+
+    def tail_text(self) -> str:
+        with self.lock_tail:
+            return "\n".join(self.tail)
+
+    def close(self) -> None:
+        self.file.close()
+        super().close()
+
+
+class Heartbeat(threading.Thread):
+    """Writes progress and liveness; learns about cancellation and a lost claim."""
+
+    def __init__(self, factory: sessionmaker[Session], settings: Settings, held: Claim,
+                 run_log: RunLog, sim_seconds: float) -> None:
+        super().__init__(name=f"heartbeat-{held.run_id}", daemon=True)
+        self.factory, self.settings, self.held, self.run_log = factory, settings, held, run_log
+        self.sim_seconds = sim_seconds
+        self.sim_time = 0.0
+        self.cancelled = threading.Event()
+        self.lost = threading.Event()
+        self.stop = threading.Event()
+
+    def run(self) -> None:
+        while not self.stop.wait(self.settings.heartbeat_interval_s):
+            try:
+                self.beat()
+            except Exception as exc:  # the database is away: keep flying, try again
+                log.warning("heartbeat of run %s failed: %s", self.held.run_id, exc)
+
+    def beat(self) -> None:
+        with self.factory() as session:
+            result = session.execute(update(Run).where(
+                Run.id == self.held.run_id, Run.claim_token == self.held.token,
+                Run.status == RunState.RUNNING.value).values(
+                heartbeat_at=utcnow(), sim_time_s=self.sim_time,
+                progress=min(self.sim_time / max(self.sim_seconds, 1e-9), 0.999),
+                log_tail=self.run_log.tail_text()))
+            cancel = session.scalar(select(Run.cancel_requested).where(
+                Run.id == self.held.run_id))
+            session.commit()
+        if not getattr(result, "rowcount", 0):
+            self.lost.set()
+        if cancel:
+            self.cancelled.set()
+
+
+@dataclass(frozen=True)
+class _RunSpec:
+    area: str
+    area_file: str | None
+    planner: str
+    preset: str
+    seed: int
+    seconds: float
+
+
+def _spec(factory: sessionmaker[Session], run_id: int) -> _RunSpec:
+    with factory() as session:
+        run, area, planner = session.execute(
+            select(Run, AreaRow, PlannerRow).join(AreaRow, Run.area_id == AreaRow.id)
+            .join(Job, Run.job_id == Job.id).join(PlannerRow, Job.planner_id == PlannerRow.id)
+            .where(Run.id == run_id)).one()
+        return _RunSpec(area.name, area.stats.get("file"), planner.key, run.preset, run.seed,
+                        run.seconds)
+
+
+def _load_area(spec: _RunSpec, store: ArtifactStore) -> Any:
+    """The area, fetching an uploaded one from the artifact store if this machine lacks it."""
+    from areas.registry import UnknownAreaError, load_area
+    from areas.store import areas_dir
+
+    try:
+        return load_area(spec.area)
+    except UnknownAreaError:
+        if spec.area_file is None:
+            raise
+    source = store.open_path(spec.area_file)
+    target = areas_dir() / f"{spec.area}.npz"
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = target.with_suffix(".part")
+    tmp.write_bytes(source.read_bytes())
+    os.replace(tmp, target)
+    return load_area(spec.area)
+
+
+def execute_run(run_id: int, settings: Settings) -> str:
+    """Run `run_id` if it is there to be run; returns a word on what happened."""
+    factory = sessions_for(settings)
+    held = claim(factory, settings, run_id)
+    if held is None:
+        return "skipped"
+    spec = _spec(factory, run_id)
+    wall0 = time.monotonic()
+    with tempfile.TemporaryDirectory(prefix=f"flybo-run-{run_id}-") as tmp_name:
+        tmp = Path(tmp_name)
+        run_log = RunLog(tmp / "run.log")
+        watched = [logging.getLogger(n) for n in ("sim", "planners", "areas", "worker")]
+        for logger in watched:
+            logger.addHandler(run_log)
+            logger.setLevel(logging.INFO)
+        beat = Heartbeat(factory, settings, held, run_log, spec.seconds)
+        beat.start()
+        try:
+            return _fly_and_store(factory, settings, held, spec, tmp, run_log, beat, wall0)
+        finally:
+            beat.stop.set()
+            beat.join(timeout=10)
+            for logger in watched:
+                logger.removeHandler(run_log)
+            run_log.close()
+
+
+def _fly_and_store(factory: sessionmaker[Session], settings: Settings, held: Claim,
+                   spec: _RunSpec, tmp: Path, run_log: RunLog, beat: Heartbeat,
+                   wall0: float) -> str:
+    from celery.exceptions import SoftTimeLimitExceeded
+
+    store = open_store(settings.artifacts, endpoint_url=settings.s3_endpoint_url,
+                       cache_dir=settings.resolved_data_dir / "cache")
+    log.info("run %s attempt %s on %s: %s on %s, seed %s, preset %s, %.0f s", held.run_id,
+             held.attempt, worker_name(), spec.planner, spec.area, spec.seed, spec.preset,
+             spec.seconds)
+    try:
+        result = _simulate(spec, tmp, beat, store)
+        outcome = result.status.value
+        log.info("run %s %s: %s; coverage %.4f, F-score %.4f", held.run_id, outcome,
+                 result.reason, result.coverage, result.surface.fscore)
+        files = _write_files(result, tmp)
+        keys = f"runs/{held.run_id}/attempt-{held.attempt}-{held.token[:8]}"
+        run_log.flush()
+        stored = {kind: (store.put(f"{keys}/{path.name}", path), ctype)
+                  for kind, (path, ctype) in {**files, "log": (run_log.path,
+                                                           "text/plain; charset=utf-8")}.items()}
+    except RunAbortedError as exc:
+        if exc.why == "cancelled":
+            _finish(factory, held, RunState.CANCELLED, wall0, error="cancelled while running")
+            return "cancelled"
+        return "lost its claim"
+    except SoftTimeLimitExceeded:
+        limit = settings.run_time_limit_s(spec.seconds)
+        _finish(factory, held, RunState.FAILED, wall0, kind=FailureKind.PLANNER,
+                error=f"exceeded its wall-time limit of {limit:.0f} s")
+        return "timed out"
+    except ArtifactStoreError as exc:
+        _finish(factory, held, RunState.FAILED, wall0, kind=FailureKind.PLATFORM,
+                error=f"could not store the run's artifacts: {exc}")
+        return "failed"
+    except Exception as exc:
+        log.exception("run %s failed", held.run_id)
+        _finish(factory, held, RunState.FAILED, wall0, kind=FailureKind.PLATFORM,
+                error=f"{type(exc).__name__}: {exc}")
+        return "failed"
+    failed = outcome == "failed"
+    done = _finish(
+        factory, held, RunState.FAILED if failed else RunState.SUCCEEDED, wall0,
+        kind=FailureKind.PLANNER if failed else None,
+        error=result.reason if failed else None,
+        rows=lambda: _result_rows(held.run_id, result, spec, stored),
+    )
+    return outcome if done else "lost its claim"
+
+
+def _simulate(spec: _RunSpec, tmp: Path, beat: Heartbeat, store: ArtifactStore) -> Any:
+    from areas import load_ground_truth
+    from planners.registry import make
+    from sim.config import preset
+    from sim.episode import run_episode
+
+    area = _load_area(spec, store)
+    truth = load_ground_truth(area)
+    planner = make(spec.planner)
+    last_note = [0.0]
+
+    def progress(t: float, volume: float) -> None:
+        beat.sim_time = t
+        if beat.cancelled.is_set():
+            raise RunAbortedError("cancelled")
+        if beat.lost.is_set():
+            raise RunAbortedError("lost")
+        if t - last_note[0] >= 30.0:
+            last_note[0] = t
+            log.info("t = %.0f s, explored %.1f m³", t, volume)
+
+    return run_episode(area, truth, planner, preset(spec.preset), spec.seed,
+                       planner_name=spec.planner, preset_name=spec.preset,
+                       seconds=spec.seconds, recording_path=tmp / "recording.npz",
+                       progress=progress)
+
+
+def _write_files(result: Any, tmp: Path) -> dict[str, tuple[Path, str]]:
+    from sim.open3d_any import o3d
+
+    mesh_path = tmp / "mesh.ply"
+    mesh = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(np.asarray(result.mesh_vertices, dtype=np.float64)),
+        o3d.utility.Vector3iVector(np.asarray(result.mesh_triangles, dtype=np.int32)))
+    o3d.io.write_triangle_mesh(str(mesh_path), mesh, write_ascii=False)
+    result_path = tmp / "result.json"
+    result_path.write_text(json.dumps(result.to_json()))
+    return {"recording": (tmp / "recording.npz", "application/octet-stream"),
+            "mesh": (mesh_path, "application/octet-stream"),
+            "result": (result_path, "application/json")}
+
+
+def _f32(values: Any) -> bytes:
+    return np.asarray(values, dtype="<f4").tobytes()
+
+
+def _opt(value: float) -> float | None:
+    return float(value) if np.isfinite(value) else None
+
+
+def _result_rows(run_id: int, result: Any, spec: _RunSpec,
+                 stored: dict[str, tuple[Any, str]]) -> list[Any]:
+    from sim.metrics import timing_summary, volumetric_efficiency
+
+    times = np.asarray(result.volume_times)
+    volume = np.asarray(result.volume_m3)
+    plateau = _plateau_s(spec)
+    at_plateau = volume[times <= plateau + 1e-6]
+    timing = timing_summary(result.planning_times_ms)
+    surface = result.surface
+    rows: list[Any] = [
+        RunResult(
+            run_id=run_id, outcome=result.status.value, reason=result.reason,
+            simulated_until_s=float(result.simulated_until),
+            explored_volume_m3=float(result.explored_volume_m3),
+            volume_at_plateau_m3=float(at_plateau[-1]) if len(at_plateau) else 0.0,
+            observable_volume_m3=float(result.observable_volume_m3),
+            coverage=float(result.coverage),
+            volumetric_efficiency=float(volumetric_efficiency(result.explored_volume_m3,
+                                                              result.sim_seconds)),
+            precision=_opt(surface.precision), recall=_opt(surface.recall),
+            fscore=_opt(surface.fscore), rmse_m=_opt(surface.rmse_m),
+            collisions=int(result.collisions), path_length_m=float(result.path_length_m),
+            iterations=int(result.iterations),
+            planning_ms_median=_opt(timing.get("median", float("nan"))),
+            planning_ms_mean=_opt(timing.get("mean", float("nan"))),
+            planning_ms_max=_opt(timing.get("max", float("nan"))),
+            wall_seconds=float(result.wall_seconds)),
+        MetricSeries(run_id=run_id, time_s=_f32(times), explored_volume_m3=_f32(volume),
+                     recall_time_s=_f32(result.recall_times),
+                     surface_recall=_f32(result.recall)),
+    ]
+    for kind, (artifact, ctype) in stored.items():
+        rows.append(Artifact(run_id=run_id, kind=kind, location=artifact.location,
+                             size_bytes=artifact.size_bytes, sha256=artifact.sha256,
+                             content_type=ctype))
+    return rows
+
+
+_plateaus: dict[str, float] = {}
+
+
+def _plateau_s(spec: _RunSpec) -> float:
+    from areas.registry import load_area
+
+    if spec.area not in _plateaus:
+        _plateaus[spec.area] = float(load_area(spec.area).plateau_s)
+    return _plateaus[spec.area]
+
+
+def _finish(factory: sessionmaker[Session], held: Claim, state: RunState, wall0: float, *,
+            kind: FailureKind | None = None, error: str | None = None,
+            rows: Any = None) -> bool:
+    """Set the final state (with the result rows) if this attempt still holds the run."""
+    with factory() as session:
+        changed = session.execute(update(Run).where(
+            Run.id == held.run_id, Run.claim_token == held.token,
+            Run.status == RunState.RUNNING.value).values(
+            status=state.value, finished_at=utcnow(), progress=1.0, error=error,
+            failure_kind=kind.value if kind else None,
+            wall_time_s=time.monotonic() - wall0))
+        if not getattr(changed, "rowcount", 0):
+            session.rollback()
+            return False
+        if rows is not None:
+            session.add_all(rows())
+        session.commit()
+    return True
