@@ -77,6 +77,9 @@ def _parser() -> argparse.ArgumentParser:
     imp.add_argument("--overwrite", action="store_true", help="replace an area of that name")
     sub.add_parser("planners", help="list the registered planners")
     sub.add_parser("presets", help="list the episode presets")
+    from flybo.service_cli import add_service_commands
+
+    add_service_commands(sub)
     return parser
 
 
@@ -93,6 +96,10 @@ def main(argv: list[str] | None = None) -> None:
             _list_planners()
         elif args.command == "presets":
             _list_presets()
+        else:
+            from flybo.service_cli import run_service_command
+
+            run_service_command(args)
     except CliError as exc:
         print(f"flybo: error: {exc}", file=sys.stderr)
         raise SystemExit(2) from None

@@ -28,7 +28,9 @@ log = logging.getLogger(__name__)
 API_PREFIX = "/api/v1"
 
 
-def create_app(settings: Settings | None = None, *, sweeper: bool = True) -> FastAPI:
+def create_app(settings: Settings | None = None, *, sweeper: bool = True,
+               sync_areas: bool = True) -> FastAPI:
+    """The app; `sweeper` and `sync_areas` turn off the background work (for tests)."""
     settings = settings or load_settings()
     engine = make_engine(settings.db_url)
     sessions = make_session_factory(engine)
@@ -40,7 +42,7 @@ def create_app(settings: Settings | None = None, *, sweeper: bool = True) -> Fas
             await asyncio.to_thread(sync_builtin_planners, session)
         # Areas are built in the background: the API answers meanwhile, and a job naming an
         # area not synced yet builds its row on demand.
-        area_sync = asyncio.create_task(asyncio.to_thread(_sync_areas))
+        area_sync = asyncio.create_task(asyncio.to_thread(_sync_areas)) if sync_areas else None
         sweeping = asyncio.create_task(_sweep_forever()) if sweeper else None
         try:
             yield

@@ -9,6 +9,7 @@ import logging
 from typing import Any
 
 from sqlalchemy import select
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from server.models import AreaRow, PlannerRow
@@ -39,8 +40,13 @@ def upsert_area(session: Session, area: Any, *, builtin: bool,
               "plateau_s": float(area.plateau_s), "voxel_size": float(area.voxel_size),
               "stats": area_stats(area)}
     if row is None:
-        row = AreaRow(name=area.name, owner_id=owner_id, **values)
-        session.add(row)
+        try:
+            # A savepoint: another process may insert the same built-in area at the same time.
+            with session.begin_nested():
+                row = AreaRow(name=area.name, owner_id=owner_id, **values)
+                session.add(row)
+        except IntegrityError:
+            row = session.scalars(select(AreaRow).where(AreaRow.name == area.name)).one()
     elif row.content_hash != area.content_hash or row.stats != values["stats"]:
         for key, value in values.items():
             setattr(row, key, value)
@@ -79,9 +85,13 @@ def sync_builtin_planners(session: Session) -> None:
         config = s.config_model.model_json_schema()
         defaults = s.config_model().model_dump(mode="json")
         if row is None:
-            session.add(PlannerRow(name=s.name, version=s.version, builtin=True,
-                                   description=s.description, reference=s.reference,
-                                   config={"defaults": defaults, "schema": config}))
+            try:
+                with session.begin_nested():
+                    session.add(PlannerRow(name=s.name, version=s.version, builtin=True,
+                                           description=s.description, reference=s.reference,
+                                           config={"defaults": defaults, "schema": config}))
+            except IntegrityError:
+                pass  # another process registered it just now
         else:
             row.description, row.reference = s.description, s.reference
             row.config = {"defaults": defaults, "schema": config}

@@ -233,6 +233,7 @@ def execute_run(run_id: int, settings: Settings) -> str:
         finally:
             beat.stop.set()
             beat.join(timeout=10)
+            _save_tail(factory, held, run_log.tail_text())
             for logger in watched:
                 logger.removeHandler(run_log)
             run_log.close()
@@ -286,6 +287,17 @@ def _fly_and_store(factory: sessionmaker[Session], settings: Settings, held: Cla
         rows=lambda: _result_rows(held.run_id, result, spec, stored),
     )
     return outcome if done else "lost its claim"
+
+
+def _save_tail(factory: sessionmaker[Session], held: Claim, tail: str) -> None:
+    """The last log lines, kept with the run whatever its end (only by the claim's holder)."""
+    try:
+        with factory() as session:
+            session.execute(update(Run).where(Run.id == held.run_id,
+                                              Run.claim_token == held.token).values(log_tail=tail))
+            session.commit()
+    except Exception as exc:  # the full log is in the artifact store when it could be stored
+        log.warning("could not save the log tail of run %s: %s", held.run_id, exc)
 
 
 def _simulate(spec: _RunSpec, tmp: Path, beat: Heartbeat, store: ArtifactStore) -> Any:
