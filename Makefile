@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 SYSTEM_LIBS := libusb-1.0-0 libgl1 libegl1 libgomp1
 
-.PHONY: install system-deps run test lint typecheck benchmark clean
+.PHONY: install system-deps run demo-run test lint typecheck benchmark clean
 
 install: $(STAMP)
 
@@ -27,7 +27,14 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install -q -e '.[dev]'
 	touch $(STAMP)
 
+# The embedded service (API, web pages, one worker; SQLite and a local broker under ./data),
+# with a demo user and a short MAZE + Classic job. Stop it with Ctrl-C.
+HOST ?= 127.0.0.1
+PORT ?= 8000
 run: install
+	$(BIN)/flybo serve --host $(HOST) --port $(PORT) --demo
+
+demo-run: install
 	$(BIN)/flybo run --area maze --planner classic --seed 0 --out data/runs/maze-classic-$$(date +%Y%m%d-%H%M%S)
 
 test: install

@@ -6,7 +6,7 @@ from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
-from sqlalchemy import func, select
+from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from server.models import Job, Run
@@ -183,3 +183,19 @@ def test_run_log_is_private(client: TestClient, tokens: Any) -> None:
 def test_leaderboard_is_empty_without_results(client: TestClient) -> None:
     board = client.get("/api/v1/leaderboard", params={"preset": "default"}).json()
     assert board == {"preset": "default", "areas": [], "overall": [], "entries": []}
+
+
+def test_front_page_escapes_what_it_shows(client: TestClient, tokens: Any,
+                                          sessions: sessionmaker[Session]) -> None:
+    from server.models import User
+
+    with sessions() as s:
+        s.execute(update(User).where(User.name == "alice").values(
+            name="<script>alert(1)</script>"))
+        s.commit()
+    _submit(client, tokens.auth("alice"), runs=1)
+    page = client.get("/")
+    assert page.status_code == 200 and page.headers["content-type"].startswith("text/html")
+    assert "<script>alert(1)</script>" not in page.text
+    assert "&lt;script&gt;alert(1)&lt;/script&gt;" in page.text
+    assert "No results yet." in page.text

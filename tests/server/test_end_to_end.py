@@ -61,6 +61,10 @@ def _token(env: dict[str, str], user: str) -> str:
     return out.stdout.strip()
 
 
+def _cli(command: list[str], env: dict[str, str]) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(command, env=env, capture_output=True, text=True, timeout=180)
+
+
 def _wait_healthy(base: str, logs: Path, timeout: float = 60.0) -> None:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -123,6 +127,22 @@ def test_embedded_service(tmp_path: Path) -> None:
         assert (entry["planner"], entry["area"], entry["runs"]) == ("classic-v1", "maze", 2)
         assert board["overall"][0]["rank"] == 1
         assert elapsed < 240
+
+        # The command-line client against the same server.
+        client = [sys.executable, "-m", "flybo"]
+        shown = _cli([*client, "jobs", str(job["id"]), "--server", base], env)
+        assert shown.returncode == 0 and "succeeded" in shown.stdout
+        results = _cli([*client, "results", "--server", base], env)
+        assert results.returncode == 0 and "classic-v1" in results.stdout
+        refused = _cli([*client, "submit", "--server", base, "--token", token, "--planner",
+                        "teleport", "--areas", "maze"], env)
+        assert refused.returncode == 2 and "classic-v1" in refused.stderr
+        no_token = _cli([*client, "submit", "--server", base, "--planner", "classic",
+                         "--areas", "maze"], {**env, "FLYBO_TOKEN": ""})
+        assert no_token.returncode == 2 and "token" in no_token.stderr
+        waited = _cli([*client, "submit", "--server", base, "--token", token, "--planner",
+                       "classic", "--areas", "maze", "--seconds", "5", "--wait"], env)
+        assert waited.returncode == 0 and "succeeded" in waited.stdout, waited.stderr
 
         # Cancel while running: the run stops within seconds, and the job ends cancelled.
         long = httpx.post(f"{base}/api/v1/jobs", headers=auth, json={

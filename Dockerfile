@@ -1,0 +1,21 @@
+# One image for the API and the workers (see docker-compose.yml).
+FROM python:3.11-slim-bookworm
+RUN apt-get update -qq \
+ && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
+      libusb-1.0-0 libgl1 libegl1 libgomp1 curl \
+ && rm -rf /var/lib/apt/lists/*
+WORKDIR /app
+COPY pyproject.toml README.md ./
+COPY flybo flybo
+COPY areas areas
+COPY sim sim
+COPY planners planners
+COPY server server
+COPY worker worker
+COPY web web
+COPY migrations migrations
+RUN pip install --no-cache-dir -e '.[s3]'
+ENV FLYBO_DATA_DIR=/data FLYBO_CACHE_DIR=/data/cache
+VOLUME /data
+EXPOSE 8000
+CMD ["flybo", "serve", "--host", "0.0.0.0", "--port", "8000", "--workers", "0"]
