@@ -4,14 +4,22 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 SYSTEM_LIBS := libusb-1.0-0 libgl1 libegl1 libgomp1
+# Browser tests drive Debian's Chromium through Playwright (never a downloaded browser).
+TEST_SYSTEM_PACKAGES := chromium
 
-.PHONY: install system-deps run demo-run test lint typecheck benchmark clean
+.PHONY: install system-deps test-system-deps apt-packages run demo-run test lint typecheck benchmark clean
 
 install: $(STAMP)
 
 # Open3D's wheels link against these shared libraries; install whichever are missing.
 system-deps:
-	@missing=""; for p in $(SYSTEM_LIBS); do \
+	@$(MAKE) --no-print-directory apt-packages PACKAGES="$(SYSTEM_LIBS)"
+
+test-system-deps:
+	@$(MAKE) --no-print-directory apt-packages PACKAGES="$(TEST_SYSTEM_PACKAGES)"
+
+apt-packages:
+	@missing=""; for p in $(PACKAGES); do \
 	  dpkg-query -W -f='$${Status}' $$p 2>/dev/null | grep -q "install ok installed" || missing="$$missing $$p"; \
 	done; \
 	if [ -n "$$missing" ]; then \
@@ -37,7 +45,7 @@ run: install
 demo-run: install
 	$(BIN)/flybo run --area maze --planner classic --seed 0 --out data/runs/maze-classic-$$(date +%Y%m%d-%H%M%S)
 
-test: install
+test: install test-system-deps
 	$(BIN)/ruff check .
 	$(BIN)/mypy
 	$(BIN)/pytest

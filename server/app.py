@@ -78,9 +78,9 @@ def create_app(settings: Settings | None = None, *, sweeper: bool = True,
     for router in (areas.router, planners.router, jobs.router, runs.router,
                    leaderboard.router):
         app.include_router(router, prefix=API_PREFIX)
-    from web.pages import router as pages  # web reads through the server's layer
+    from web import install_web  # the website reads through the server's layer
 
-    app.include_router(pages)
+    install_web(app)
     _install_error_handlers(app)
     return app
 
