@@ -8,9 +8,10 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
-COMMANDS = ("serve", "worker", "tokens", "submit", "jobs", "results")
+COMMANDS = ("serve", "worker", "tokens", "submit", "submit-planner", "jobs", "results")
 DEFAULT_SERVER = "http://127.0.0.1:8000"
 
 
@@ -54,6 +55,11 @@ def add_service_commands(sub: Any) -> None:
                         help="simulated seconds (default: each area's plateau time)")
     submit.add_argument("--preset", default="default")
     submit.add_argument("--wait", action="store_true", help="wait with a progress bar")
+    upload = sub.add_parser("submit-planner", help="upload a planner (.py or .zip) to a service")
+    client(upload)
+    upload.add_argument("file", type=Path)
+    upload.add_argument("--name", required=True)
+    upload.add_argument("--description", default="")
     jobs = sub.add_parser("jobs", help="list jobs, or show one (and wait for it)")
     client(jobs)
     jobs.add_argument("job_id", nargs="?", type=int)
@@ -66,7 +72,31 @@ def add_service_commands(sub: Any) -> None:
 
 def run_service_command(args: argparse.Namespace) -> None:
     {"serve": _serve, "worker": _worker, "tokens": _tokens, "submit": _submit, "jobs": _jobs,
-     "results": _results}[args.command](args)
+     "results": _results, "submit-planner": _submit_planner}[args.command](args)
+
+
+def check_planner(path: Path) -> None:
+    """`flybo planners check FILE`: the upload's checks and dry run, on this machine."""
+    from worker.sandbox.dry_run import dry_run
+    from worker.sandbox.isolation import probe
+    from worker.sandbox.package import PackageError, load_package
+
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise _error(f"cannot read {path}: {exc.strerror or exc}") from None
+    try:
+        package = load_package(path.name, data)
+    except PackageError as exc:
+        raise _error(f"{path}: {exc}") from None
+    for note in probe().notes:
+        print(f"note: {note}")
+    outcome = dry_run(package)
+    print(outcome.output)
+    if not outcome.passed:
+        raise _error(f"{path} failed its dry run")
+    print(f"{path}: passed ({len(package.files)} files, code hash {package.code_hash[:12]}, "
+          f"{outcome.wall_s:.1f} s)")
 
 
 # -- local commands ---------------------------------------------------------------------------
@@ -194,6 +224,17 @@ def _request(args: argparse.Namespace, method: str, path: str, *, auth: bool = F
             detail = response.text
         raise _error(f"{method} {path} answered {response.status_code}: {detail}")
     return response.json()
+
+
+def _submit_planner(args: argparse.Namespace) -> None:
+    try:
+        data = args.file.read_bytes()
+    except OSError as exc:
+        raise _error(f"cannot read {args.file}: {exc.strerror or exc}") from None
+    planner = _request(args, "POST", "/planners", auth=True,
+                       files={"file": (args.file.name, data)},
+                       data={"name": args.name, "description": args.description})
+    print(f"planner {planner['id']} stored (code hash {planner['code_hash'][:12]})")
 
 
 def _submit(args: argparse.Namespace) -> None:

@@ -20,7 +20,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from server.catalog import sync_builtin_areas, sync_builtin_planners
 from server.db import make_engine, make_session_factory, session_scope
 from server.migrate import upgrade
-from server.routes import areas, health, jobs, leaderboard, planners, runs
+from server.routes import areas, curves, health, jobs, leaderboard, planners, runs
 from server.settings import Settings, load_settings
 from server.sweeper import sweep
 
@@ -76,7 +76,7 @@ def create_app(settings: Settings | None = None, *, sweeper: bool = True,
     app.state.sessions = sessions
     app.include_router(health.router)
     for router in (areas.router, planners.router, jobs.router, runs.router,
-                   leaderboard.router):
+                   leaderboard.router, curves.router):
         app.include_router(router, prefix=API_PREFIX)
     from web import install_web  # the website reads through the server's layer
 

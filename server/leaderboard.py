@@ -107,6 +107,7 @@ def _overall(entries: list[LeaderboardEntry]) -> list[LeaderboardPlanner]:
     for planner, mine in by_planner.items():
         fscores = [e.fscore.mean for e in mine if e.fscore.mean is not None]
         franks = [e.fscore_rank for e in mine if e.fscore_rank is not None]
+        rmses = [e.rmse_m.mean for e in mine if e.rmse_m.mean is not None]
         overall.append(LeaderboardPlanner(
             planner=planner, builtin=mine[0].builtin, areas=len(mine),
             mean_coverage=sum(e.coverage.mean or 0.0 for e in mine) / len(mine),
@@ -115,8 +116,22 @@ def _overall(entries: list[LeaderboardEntry]) -> list[LeaderboardPlanner]:
             mean_coverage_rank=sum(e.coverage_rank for e in mine) / len(mine),
             mean_fscore_rank=sum(franks) / len(franks) if franks else None,
             rank=0,
+            mean_rmse_m=sum(rmses) / len(rmses) if rmses else None,
         ))
     overall.sort(key=lambda p: (p.mean_coverage_rank, -p.mean_coverage))
     for i, p in enumerate(overall, start=1):
         p.rank = i
+    _mark_pareto(overall)
     return overall
+
+
+def _mark_pareto(overall: list[LeaderboardPlanner]) -> None:
+    """The paper's Figure 6: the planners no other beats in both coverage and F-score rank.
+
+    Lower ranks are better. A planner without an F-score rank (no mesh scores) is left out.
+    """
+    ranked = [(p, p.mean_coverage_rank, p.mean_fscore_rank) for p in overall
+              if p.mean_fscore_rank is not None]
+    for p, cov, fs in ranked:
+        p.pareto = not any(qc <= cov and qf <= fs and (qc < cov or qf < fs)
+                           for _, qc, qf in ranked)

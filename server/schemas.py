@@ -42,6 +42,7 @@ class PlannerOut(BaseModel):
     reference: str
     config: dict[str, Any]
     owner: str | None
+    code_hash: str | None = None
 
 
 class JobCreate(BaseModel):
@@ -179,6 +180,11 @@ class LeaderboardPlanner(BaseModel):
     mean_coverage_rank: float
     mean_fscore_rank: float | None
     rank: int
+    mean_rmse_m: float | None = Field(default=None, description="mean over areas of the "
+                                      "per-area mean RMSE")
+    pareto: bool = Field(default=False, description="not dominated in (mean coverage rank, "
+                         "mean F-score rank): no planner is at least as good in both and "
+                         "better in one")
 
 
 class Leaderboard(BaseModel):
@@ -186,3 +192,28 @@ class Leaderboard(BaseModel):
     areas: list[str]
     overall: list[LeaderboardPlanner]
     entries: list[LeaderboardEntry]
+
+
+class Band(BaseModel):
+    """A curve over runs: at each time, the mean, min and max of the runs that reached it."""
+
+    mean: list[float | None]
+    min: list[float | None]
+    max: list[float | None]
+
+
+class PlannerCurves(BaseModel):
+    planner: str
+    builtin: bool
+    runs: int
+    time_s: list[float]
+    explored_volume_m3: Band
+    recall_time_s: list[float]
+    surface_recall: Band
+
+
+class Curves(BaseModel):
+    preset: str
+    area: str
+    plateau_s: float | None
+    planners: list[PlannerCurves]

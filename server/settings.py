@@ -42,6 +42,15 @@ class Settings(BaseSettings):
     max_runs_per_job: int = Field(default=200, ge=1)
     max_seconds_per_run: float = Field(default=3600.0, gt=0)
 
+    # Uploaded planners and the sandbox.
+    max_planner_upload_mib: float = Field(default=1.0, gt=0)
+    max_planner_unpacked_mib: float = Field(default=10.0, gt=0)
+    max_planner_files: int = Field(default=200, ge=1)
+    sandbox_builtin: bool = Field(default=False,
+                                  description="run built-in planners in the sandbox too")
+    sandbox_plan_timeout_s: float = Field(default=10.0, gt=0)
+    sandbox_memory_mib: int = Field(default=2048, ge=256)
+
     # Workers.
     heartbeat_interval_s: float = Field(default=3.0, gt=0)
     heartbeat_timeout_s: float = Field(default=60.0, gt=0)

@@ -81,6 +81,11 @@ class MapView:
         self._stack.frontiers.update()
         return self._stack.frontiers.frontier
 
+    @property
+    def occupancy_map(self) -> OccupancyMap:
+        """The underlying map, for framework code that follows its changes (`subscribe`)."""
+        return self._stack.occupancy
+
     def frontier_clusters(self, min_size: int = 5) -> list[FrontierCluster]:
         """Connected frontier clusters with at least `min_size` voxels."""
         return self._stack.frontiers.clusters(min_size)

@@ -177,6 +177,8 @@ class _RunSpec:
     area: str
     area_file: str | None
     planner: str
+    planner_builtin: bool
+    planner_code: str | None  # artifact location of an uploaded planner's code
     preset: str
     seed: int
     seconds: float
@@ -188,8 +190,8 @@ def _spec(factory: sessionmaker[Session], run_id: int) -> _RunSpec:
             select(Run, AreaRow, PlannerRow).join(AreaRow, Run.area_id == AreaRow.id)
             .join(Job, Run.job_id == Job.id).join(PlannerRow, Job.planner_id == PlannerRow.id)
             .where(Run.id == run_id)).one()
-        return _RunSpec(area.name, area.stats.get("file"), planner.key, run.preset, run.seed,
-                        run.seconds)
+        return _RunSpec(area.name, area.stats.get("file"), planner.key, planner.builtin,
+                        planner.config.get("code"), run.preset, run.seed, run.seconds)
 
 
 def _load_area(spec: _RunSpec, store: ArtifactStore) -> Any:
@@ -244,13 +246,15 @@ def _fly_and_store(factory: sessionmaker[Session], settings: Settings, held: Cla
                    wall0: float) -> str:
     from celery.exceptions import SoftTimeLimitExceeded
 
+    from worker.sandbox.proxy import SandboxError
+
     store = open_store(settings.artifacts, endpoint_url=settings.s3_endpoint_url,
                        cache_dir=settings.resolved_data_dir / "cache")
     log.info("run %s attempt %s on %s: %s on %s, seed %s, preset %s, %.0f s", held.run_id,
              held.attempt, worker_name(), spec.planner, spec.area, spec.seed, spec.preset,
              spec.seconds)
     try:
-        result = _simulate(spec, tmp, beat, store)
+        result = _simulate(spec, tmp, beat, store, settings)
         outcome = result.status.value
         log.info("run %s %s: %s; coverage %.4f, F-score %.4f", held.run_id, outcome,
                  result.reason, result.coverage, result.surface.fscore)
@@ -270,6 +274,9 @@ def _fly_and_store(factory: sessionmaker[Session], settings: Settings, held: Cla
         _finish(factory, held, RunState.FAILED, wall0, kind=FailureKind.PLANNER,
                 error=f"exceeded its wall-time limit of {limit:.0f} s")
         return "timed out"
+    except SandboxError as exc:
+        _finish(factory, held, RunState.FAILED, wall0, kind=FailureKind.PLANNER, error=str(exc))
+        return "failed"
     except ArtifactStoreError as exc:
         _finish(factory, held, RunState.FAILED, wall0, kind=FailureKind.PLATFORM,
                 error=f"could not store the run's artifacts: {exc}")
@@ -300,7 +307,8 @@ def _save_tail(factory: sessionmaker[Session], held: Claim, tail: str) -> None:
         log.warning("could not save the log tail of run %s: %s", held.run_id, exc)
 
 
-def _simulate(spec: _RunSpec, tmp: Path, beat: Heartbeat, store: ArtifactStore) -> Any:
+def _simulate(spec: _RunSpec, tmp: Path, beat: Heartbeat, store: ArtifactStore,
+              settings: Settings) -> Any:
     from areas import load_ground_truth
     from planners.registry import make
     from sim.config import preset
@@ -308,7 +316,6 @@ def _simulate(spec: _RunSpec, tmp: Path, beat: Heartbeat, store: ArtifactStore) 
 
     area = _load_area(spec, store)
     truth = load_ground_truth(area)
-    planner = make(spec.planner)
     last_note = [0.0]
 
     def progress(t: float, volume: float) -> None:
@@ -321,10 +328,35 @@ def _simulate(spec: _RunSpec, tmp: Path, beat: Heartbeat, store: ArtifactStore) 
             last_note[0] = t
             log.info("t = %.0f s, explored %.1f m³", t, volume)
 
-    return run_episode(area, truth, planner, preset(spec.preset), spec.seed,
-                       planner_name=spec.planner, preset_name=spec.preset,
-                       seconds=spec.seconds, recording_path=tmp / "recording.npz",
-                       progress=progress)
+    def fly(planner: Any) -> Any:
+        return run_episode(area, truth, planner, preset(spec.preset), spec.seed,
+                           planner_name=spec.planner, preset_name=spec.preset,
+                           seconds=spec.seconds, recording_path=tmp / "recording.npz",
+                           progress=progress)
+
+    if spec.planner_builtin and not settings.sandbox_builtin:
+        return fly(make(spec.planner))
+    from worker.sandbox.isolation import SandboxLimits
+    from worker.sandbox.package import read_stored_package
+    from worker.sandbox.proxy import SandboxedPlanner
+
+    limits = SandboxLimits(plan_timeout_s=settings.sandbox_plan_timeout_s,
+                           memory_mib=settings.sandbox_memory_mib,
+                           run_planning_budget_s=settings.run_time_limit_s(spec.seconds))
+    if spec.planner_builtin:
+        with SandboxedPlanner(builtin=spec.planner, limits=limits) as sandboxed:
+            return fly(sandboxed)
+    if spec.planner_code is None:
+        raise RuntimeError(f"planner {spec.planner} has no stored code")
+    package = read_stored_package(store.open_path(spec.planner_code).read_bytes())
+    code = package.extract(tmp / "code")
+    with SandboxedPlanner(code=code, limits=limits) as sandboxed:
+        try:
+            return fly(sandboxed)
+        finally:
+            tail = sandboxed.stderr_tail().strip()
+            if tail:  # the planner's own output: in the run log, for its owner only
+                log.info("planner output (last lines):\n%s", tail)
 
 
 def _write_files(result: Any, tmp: Path) -> dict[str, tuple[Path, str]]:

@@ -2,21 +2,31 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter, HTTPException
-from sqlalchemy import select
+import tempfile
+from pathlib import Path
+from typing import Annotated
+
+from fastapi import APIRouter, File, Form, HTTPException, Request, UploadFile
+from sqlalchemy import func, select
+from sqlalchemy.exc import IntegrityError
 
 from server.catalog import CatalogError, find_planner
-from server.deps import SessionDep
+from server.deps import SessionDep, SettingsDep, UserDep
 from server.models import PlannerRow, User
 from server.schemas import PlannerOut
+from server.storage import ArtifactStoreError, open_store
 
 router = APIRouter(prefix="/planners", tags=["planners"])
 
 
-def planner_out(row: PlannerRow, owner: str | None) -> PlannerOut:
+def planner_out(row: PlannerRow, owner: str | None, *, for_owner: bool = False) -> PlannerOut:
+    # Where the code is stored is the service's business; the dry run's output is its owner's.
+    config = {k: v for k, v in row.config.items() if k != "code"}
+    if "check" in config and not for_owner:
+        config["check"] = {k: v for k, v in config["check"].items() if k != "output"}
     return PlannerOut(name=row.name, version=row.version, id=row.key, builtin=row.builtin,
-                      description=row.description, reference=row.reference, config=row.config,
-                      owner=owner)
+                      description=row.description, reference=row.reference, config=config,
+                      owner=owner, code_hash=row.code_hash or None)
 
 
 @router.get("", response_model=list[PlannerOut])
@@ -37,3 +47,73 @@ def get_planner(name: str, session: SessionDep) -> PlannerOut:
         raise HTTPException(404, str(exc)) from None
     owner = session.get(User, row.owner_id) if row.owner_id is not None else None
     return planner_out(row, owner.name if owner else None)
+
+
+@router.post("", response_model=PlannerOut, status_code=201,
+             responses={403: {"description": "the name belongs to another user"},
+                        409: {"description": "a built-in planner's name"},
+                        413: {"description": "too large"},
+                        422: {"description": "refused by the checks or the dry run"}})
+def upload_planner(
+    request: Request,
+    session: SessionDep,
+    settings: SettingsDep,
+    user: UserDep,
+    file: Annotated[UploadFile, File(description="planner.py, or a .zip with planner.py")],
+    name: Annotated[str, Form(pattern=r"^[a-z][a-z0-9-]{0,39}$",
+                              description="lower-case letters, digits, hyphens")],
+    description: Annotated[str, Form(max_length=2000)] = "",
+) -> PlannerOut:
+    """Check the code, dry-run it in the sandbox, and store it as the next version of `name`."""
+    from worker.sandbox.dry_run import dry_run
+    from worker.sandbox.package import PackageError, PackageLimits, load_package
+
+    limits = PackageLimits(max_upload_bytes=int(settings.max_planner_upload_mib * 1024 * 1024),
+                           max_unpacked_bytes=int(settings.max_planner_unpacked_mib * 1024 * 1024),
+                           max_files=settings.max_planner_files)
+    length = request.headers.get("content-length")
+    if length is not None and length.isdigit() and int(length) > limits.max_upload_bytes + 65536:
+        raise HTTPException(413, f"upload too large: at most {settings.max_planner_upload_mib:g}"
+                                 " MiB")
+    builtin = session.scalar(select(PlannerRow).where(PlannerRow.name == name,
+                                                      PlannerRow.builtin.is_(True)))
+    if builtin is not None:
+        raise HTTPException(409, f"{name!r} is a built-in planner's name; choose another")
+    owner = session.scalar(select(PlannerRow.owner_id).where(PlannerRow.name == name))
+    if owner is not None and owner != user.id and not user.is_admin:
+        raise HTTPException(403, f"planner {name!r} belongs to another user")
+    data = file.file.read(limits.max_upload_bytes + 1)
+    if len(data) > limits.max_upload_bytes:
+        raise HTTPException(413, f"upload too large: at most {settings.max_planner_upload_mib:g}"
+                                 " MiB")
+    try:
+        package = load_package(file.filename or "", data, limits)
+    except PackageError as exc:
+        raise HTTPException(422, f"planner rejected: {exc}") from None
+    check = dry_run(package)
+    if not check.passed:
+        raise HTTPException(422, f"planner rejected by its dry run: {check.output[-3000:]}")
+    version = (session.scalar(select(func.max(PlannerRow.version)).where(
+        PlannerRow.name == name)) or 0) + 1
+    key = f"planners/{name}/v{version}/code.zip"
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "code.zip"
+        path.write_bytes(package.zip_bytes)
+        try:
+            stored = open_store(settings.artifacts, endpoint_url=settings.s3_endpoint_url,
+                                cache_dir=settings.resolved_data_dir / "cache").put(key, path)
+        except ArtifactStoreError as exc:
+            raise HTTPException(503, f"could not store the planner: {exc}") from None
+    row = PlannerRow(name=name, version=version, builtin=False, owner_id=user.id,
+                     description=description, code_hash=package.code_hash,
+                     config={"code": stored.location,
+                             "check": {"passed": True, "output": check.output[-4000:],
+                                       "wall_s": round(check.wall_s, 2)}})
+    session.add(row)
+    try:
+        session.commit()
+    except IntegrityError:
+        session.rollback()
+        raise HTTPException(409, f"another version of {name!r} was stored at the same time; "
+                                 "try again") from None
+    return planner_out(row, user.name, for_owner=True)

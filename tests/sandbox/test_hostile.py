@@ -1,0 +1,168 @@
+"""Hostile planners in the sandbox: each is contained, with the right reason, and this process
+(the worker) and everything outside the planner's folder stay untouched."""
+
+from __future__ import annotations
+
+import os
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from sim.config import preset
+from sim.episode import run_episode
+from sim.result import RunStatus
+from worker.sandbox.dry_run import tiny_area
+from worker.sandbox.isolation import SandboxLimits, probe
+from worker.sandbox.proxy import SandboxedPlanner, SandboxError
+
+HEADER = """
+import os, sys, socket, ctypes
+import numpy as np
+from planners.api import Plan, Planner
+"""
+
+
+def _planner(body: str, *, reset: str = "") -> str:
+    return HEADER + textwrap.dedent(f"""
+class Hostile(Planner):
+    def reset(self, ctx):
+        super().reset(ctx)
+{textwrap.indent(textwrap.dedent(reset) or "pass", " " * 8)}
+
+    def plan(self, obs):
+{textwrap.indent(textwrap.dedent(body), " " * 8)}
+""")
+
+
+@pytest.fixture(scope="module")
+def isolated() -> None:
+    iso = probe()
+    if not (iso.bwrap and iso.namespaces and iso.cgroup_pids and iso.cgroup_memory):
+        message = f"full isolation is not available here: {'; '.join(iso.notes)}"
+        if os.environ.get("CI") == "true":
+            pytest.fail(message)
+        pytest.skip(message)
+
+
+# No start-up turn: the first plan is asked for at once.
+CONFIG = preset("exact").model_copy(update={"startup_spin": False})
+
+
+def _fly(tmp_path: Path, source: str, seconds: float = 4.0, **limits: float) -> str:
+    """Fly the planner in `source`; returns the reason the run ended."""
+    code = tmp_path / "code"
+    code.mkdir(parents=True)
+    (code / "planner.py").write_text(source)
+    area, truth = tiny_area()
+    settings = SandboxLimits(**{"plan_timeout_s": 4.0, "memory_mib": 512,
+                                "file_size_mib": 8, **limits})
+    with SandboxedPlanner(code=code, limits=settings) as planner:
+        try:
+            result = run_episode(area, truth, planner, CONFIG, 0, seconds=seconds)
+        except SandboxError as exc:
+            return str(exc)
+    assert result.status is RunStatus.FAILED, result.reason
+    return result.reason
+
+
+@pytest.fixture
+def canary(tmp_path: Path) -> Path:
+    path = tmp_path / "outside" / "canary.txt"
+    path.parent.mkdir()
+    path.write_text("untouched")
+    return path
+
+
+CASES = {
+    "opens a socket": (
+        "socket.create_connection(('127.0.0.1', 5432), timeout=1)\nreturn Plan.finished()",
+        "network access is not allowed"),
+    "forks": ("os.fork()\nreturn Plan.finished()", "starting processes is not allowed"),
+    "starts a shell": ("os.system('touch /tmp/flybo-shell-was-here')\nreturn Plan.finished()",
+                       "starting processes is not allowed"),
+    "loops forever": ("while True:\n    pass", "took longer than 4 s"),
+    "reads /etc/passwd": ("open('/etc/passwd').read()\nreturn Plan.finished()",
+                          "No such file or directory: '/etc/passwd'"),
+    "returns NaN": ("return Plan(np.full((1, 4), np.nan))", "not finite"),
+    "returns the wrong type": ("return {'waypoints': [[0, 0, 0, 0]]}", "must return a Plan"),
+    "raises in reset": ("return Plan.finished()", "reset raised RuntimeError: boom"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_contained(case: str, tmp_path: Path, canary: Path, isolated: None) -> None:
+    body, expected = CASES[case]
+    reset = "raise RuntimeError('boom')" if case == "raises in reset" else ""
+    reason = _fly(tmp_path, _planner(body, reset=reset))
+    assert expected in reason
+    assert canary.read_text() == "untouched"
+    assert not Path("/tmp/flybo-shell-was-here").exists()
+
+
+def test_fork_bomb_through_native_code_is_capped(tmp_path: Path, isolated: None) -> None:
+    # ctypes calls fork() directly, past the audit hook: the pids cgroup caps it, the plan's
+    # time limit ends it, and killing the process group and the cgroup removes every child.
+    body = ("libc = ctypes.CDLL(None)\nwhile True:\n    libc.fork()")
+    reason = _fly(tmp_path, _planner(body), processes=16)
+    assert "took longer than 4 s" in reason or "process" in reason
+    assert os.getpid() > 0  # and we are still here to say so
+
+
+def test_memory_hog_is_killed(tmp_path: Path, isolated: None) -> None:
+    body = "hog = []\nwhile True:\n    hog.append(bytearray(64 * 1024 * 1024))"
+    reason = _fly(tmp_path, _planner(body), memory_mib=512)
+    assert "memory limit of 512 MiB" in reason
+
+
+def test_flood_of_output_is_cut(tmp_path: Path, isolated: None) -> None:
+    body = "while True:\n    print('x' * 1_000_000, flush=True)"
+    reason = _fly(tmp_path, _planner(body), file_size_mib=8)
+    assert "file size limit" in reason
+
+
+def test_writes_outside_its_folder_are_refused(tmp_path: Path, canary: Path,
+                                               isolated: None) -> None:
+    body = f"open({str(canary)!r}, 'w').write('owned')\nreturn Plan.finished()"
+    reason = _fly(tmp_path, _planner(body))
+    assert "writing outside the working folder" in reason or "No such file" in reason
+    assert canary.read_text() == "untouched"
+    # Even past the audit hook, the file is not in the planner's view of the filesystem.
+    native = (f"fd = ctypes.CDLL(None).open({str(canary).encode()!r}, 1)\n"
+              "raise RuntimeError(f'open gave {fd}')")
+    reason = _fly(tmp_path / "native", _planner(native))
+    assert "open gave -1" in reason
+    assert canary.read_text() == "untouched"
+
+
+def test_secrets_and_ground_truth_are_out_of_sight(tmp_path: Path, isolated: None,
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("FLYBO_SECRET_KEY", "canary-secret")
+    from areas.cache import cache_dir
+
+    truth_dir = str(cache_dir())
+    assert Path(truth_dir).exists()
+    body = (f"seen = {{'env': sorted(os.environ), 'truth': os.path.exists({truth_dir!r}),"
+            " 'root': sorted(os.listdir('/root'))}\nraise RuntimeError(repr(seen))")
+    reason = _fly(tmp_path, _planner(body))
+    assert "canary-secret" not in reason and "FLYBO_SECRET_KEY" not in reason
+    # /root holds only the Python installation the planner runs on.
+    assert "'truth': False" in reason and "'root': ['.pyenv']" in reason
+
+
+def test_out_of_bounds_plans_fail_the_run(tmp_path: Path, isolated: None) -> None:
+    body = "return Plan(np.array([[1e6, 0.0, 1.0, 0.0]]))"
+    reason = _fly(tmp_path, _planner(body), seconds=20.0)
+    assert "consecutive plans were invalid" in reason
+
+
+def test_the_worker_runs_the_next_planner_afterwards(tmp_path: Path, isolated: None) -> None:
+    _fly(tmp_path / "a", _planner("while True:\n    pass"))
+    good = _planner("return Plan(np.array([[*obs.pose.position, obs.pose.yaw + 1.0]]))")
+    code = tmp_path / "good"
+    code.mkdir()
+    (code / "planner.py").write_text(good)
+    area, truth = tiny_area()
+    with SandboxedPlanner(code=code) as planner:
+        result = run_episode(area, truth, planner, CONFIG, 0, seconds=4.0)
+    assert result.status is RunStatus.SUCCEEDED and result.iterations > 0

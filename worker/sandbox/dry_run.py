@@ -1,0 +1,70 @@
+"""The upload check's dry run: the planner flies a tiny room for a few simulated seconds."""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from worker.sandbox.isolation import SandboxLimits
+from worker.sandbox.package import PlannerPackage
+
+DRY_RUN_SECONDS = 10.0
+
+
+@dataclass(frozen=True)
+class CheckOutcome:
+    passed: bool
+    output: str
+    wall_s: float
+
+
+@lru_cache(maxsize=1)
+def tiny_area() -> tuple[Any, Any]:
+    """A closed 6 x 5 x 3 m room and its ground truth, built once per process."""
+    import trimesh
+
+    from areas.ground_truth import compute_ground_truth
+    from areas.importer import import_mesh
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "room.obj"
+        trimesh.creation.box(extents=(6.0, 5.0, 3.0)).export(path)
+        area = import_mesh(path, "check-room", plateau_s=60.0)
+    return area, compute_ground_truth(area)
+
+
+def dry_run(package: PlannerPackage, *, timeout_s: float = 60.0) -> CheckOutcome:
+    """Run the package's planner in the sandbox on `tiny_area` for `DRY_RUN_SECONDS`."""
+    from sim.config import preset
+    from sim.episode import run_episode
+    from sim.result import RunStatus
+    from worker.sandbox.proxy import SandboxedPlanner, SandboxError
+
+    area, truth = tiny_area()
+    started = time.monotonic()
+    limits = SandboxLimits(start_timeout_s=timeout_s, plan_timeout_s=10.0,
+                           run_planning_budget_s=timeout_s)
+    with tempfile.TemporaryDirectory(prefix="flybo-check-") as tmp:
+        code = package.extract(Path(tmp) / "code")
+        with SandboxedPlanner(code=code, limits=limits) as planner:
+            try:
+                result = run_episode(area, truth, planner, preset("exact"), 0,
+                                     planner_name="check", preset_name="exact",
+                                     seconds=DRY_RUN_SECONDS)
+            except SandboxError as exc:
+                return CheckOutcome(False, f"{exc}\n{planner.stderr_tail()}".strip(),
+                                    time.monotonic() - started)
+            output = planner.stderr_tail()
+    wall = time.monotonic() - started
+    if result.status is RunStatus.FAILED:
+        return CheckOutcome(False, f"the dry run failed: {result.reason}\n{output}".strip(), wall)
+    if wall > timeout_s:
+        return CheckOutcome(False, f"the dry run took {wall:.0f} s, more than {timeout_s:g}", wall)
+    return CheckOutcome(True, f"dry run of {DRY_RUN_SECONDS:g} s on a 6 x 5 x 3 m room: "
+                              f"{result.iterations} plans, explored "
+                              f"{result.explored_volume_m3:.1f} m³, {result.reason}\n{output}"
+                        .strip(), wall)

@@ -1,0 +1,248 @@
+"""How the planner process is isolated: namespaces (bubblewrap), cgroups and resource limits.
+
+- **Filesystem**: a new root holding only the system libraries, the Python installation, the
+  project's simulation and planner packages (read-only), the planner's code (read-only), the
+  map file (read-only) and an empty working folder. Ground truth, database, broker files,
+  artifacts and other submissions are not in it.
+- **Namespaces**: no network (a new, empty network namespace), own PID, IPC and UTS namespaces,
+  an empty environment, a new session; the process dies with the worker.
+- **Limits**: processes (cgroup `pids.max`), memory (cgroup memory limit), CPU seconds, open
+  files, file size and core dumps (rlimits).
+Where bubblewrap or namespaces are unavailable, `probe()` says so and the fallback runs the same
+child without them: rlimits plus the child's audit hook (`docs/sandbox.md`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+from pydantic import BaseModel, Field
+
+PROJECT_ROOT = Path(__file__).resolve().parents[2]
+# The packages the planner process imports; nothing else of the project is visible to it.
+VISIBLE_PACKAGES = ("sim", "planners", "areas", "worker")
+CGROUP_V1 = Path("/sys/fs/cgroup")
+
+
+class SandboxLimits(BaseModel):
+    """Resource limits of one planner process."""
+
+    memory_mib: int = Field(default=2048, ge=256)
+    processes: int = Field(default=64, ge=8, description="threads count too")
+    cpu_seconds: int = Field(default=3600, ge=10)
+    open_files: int = Field(default=256, ge=32)
+    file_size_mib: int = Field(default=64, ge=1)
+    start_timeout_s: float = Field(default=60.0, gt=0)
+    plan_timeout_s: float = Field(default=10.0, gt=0)
+    run_planning_budget_s: float = Field(default=1800.0, gt=0)
+
+
+@dataclass(frozen=True)
+class Isolation:
+    """What this machine offers: bubblewrap with namespaces, and which cgroup controllers."""
+
+    bwrap: str | None
+    namespaces: bool
+    cgroup_pids: Path | None
+    cgroup_memory: Path | None
+    notes: list[str] = field(default_factory=list)
+
+
+def _cgroup_root(controller: str) -> Path | None:
+    for candidate in (CGROUP_V1 / controller / "flybo-sandbox", CGROUP_V1 / "flybo-sandbox"):
+        try:
+            candidate.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            continue
+        limit_file = {"pids": "pids.max", "memory": "memory.limit_in_bytes"}[controller]
+        if candidate.parent == CGROUP_V1:  # cgroup v2: one hierarchy
+            limit_file = {"pids": "pids.max", "memory": "memory.max"}[controller]
+            with contextlib.suppress(OSError):
+                (candidate / "cgroup.subtree_control").write_text(f"+{controller}")
+        probe = candidate / f"probe-{uuid.uuid4().hex[:8]}"
+        try:
+            probe.mkdir()
+            ok = (probe / limit_file).exists()
+            probe.rmdir()
+        except OSError:
+            ok = False
+        if ok:
+            return candidate
+    return None
+
+
+@lru_cache(maxsize=1)
+def probe() -> Isolation:
+    notes = []
+    bwrap = shutil.which("bwrap")
+    namespaces = False
+    if bwrap is None:
+        notes.append("bubblewrap (bwrap) is not installed: no namespaces")
+    else:
+        result = subprocess.run([bwrap, "--unshare-all", "--die-with-parent", "--ro-bind", "/",
+                                 "/", "true"], capture_output=True, text=True, timeout=30)
+        namespaces = result.returncode == 0
+        if not namespaces:
+            notes.append(f"bubblewrap cannot create namespaces here: {result.stderr.strip()}")
+    pids, memory = _cgroup_root("pids"), _cgroup_root("memory")
+    if pids is None:
+        notes.append("no writable pids cgroup: the process count is limited by RLIMIT_NPROC "
+                     "only, which does not bind root")
+    if memory is None:
+        notes.append("no writable memory cgroup: memory is limited by RLIMIT_AS")
+    return Isolation(bwrap, namespaces, pids, memory, notes)
+
+
+@dataclass
+class Cgroups:
+    """The cgroups of one planner process, removed by `cleanup`."""
+
+    paths: list[Path]
+    memory: Path | None
+
+    def oom_killed(self) -> bool:
+        if self.memory is None:
+            return False
+        for name in ("memory.oom_control", "memory.events"):
+            path = self.memory / name
+            if path.exists():
+                for line in path.read_text().splitlines():
+                    key, _, value = line.partition(" ")
+                    if key == "oom_kill" and value.strip() not in ("", "0"):
+                        return True
+        failcnt = self.memory / "memory.failcnt"
+        return failcnt.exists() and failcnt.read_text().strip() not in ("", "0")
+
+    def cleanup(self) -> None:
+        for path in self.paths:
+            try:
+                procs = (path / "cgroup.procs").read_text().split()
+                for pid in procs:
+                    with contextlib.suppress(ProcessLookupError, ValueError):
+                        os.kill(int(pid), 9)
+                path.rmdir()
+            except OSError:
+                pass
+
+
+def make_cgroups(iso: Isolation, limits: SandboxLimits) -> Cgroups:
+    name = f"sbx-{uuid.uuid4().hex[:12]}"
+    paths: list[Path] = []
+    memory: Path | None = None
+    if iso.cgroup_pids is not None:
+        path = iso.cgroup_pids / name
+        path.mkdir()
+        (path / "pids.max").write_text(str(limits.processes))
+        paths.append(path)
+    if iso.cgroup_memory is not None:
+        path = iso.cgroup_memory / name
+        if not path.exists():
+            path.mkdir()
+        limit = str(limits.memory_mib * 1024 * 1024)
+        for fname in ("memory.limit_in_bytes", "memory.max"):
+            if (path / fname).exists():
+                (path / fname).write_text(limit)
+        swap = path / "memory.memsw.limit_in_bytes"
+        if swap.exists():
+            with contextlib.suppress(OSError):
+                swap.write_text(limit)
+        if path not in paths:
+            paths.append(path)
+        memory = path
+    return Cgroups(paths, memory)
+
+
+def preexec(limits: SandboxLimits, cgroups: Cgroups, iso: Isolation) -> Callable[[], None]:
+    """Runs in the forked child before exec: join the cgroups, set the rlimits."""
+    targets = [str(p / "cgroup.procs") for p in cgroups.paths]
+
+    def apply() -> None:
+        pid = str(os.getpid())
+        for target in targets:
+            with open(target, "w") as fh:
+                fh.write(pid)
+        mib = 1024 * 1024
+        resource.setrlimit(resource.RLIMIT_CPU, (limits.cpu_seconds, limits.cpu_seconds + 5))
+        resource.setrlimit(resource.RLIMIT_NOFILE, (limits.open_files, limits.open_files))
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limits.file_size_mib * mib,) * 2)
+        resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+        resource.setrlimit(resource.RLIMIT_NPROC, (limits.processes, limits.processes))
+        if iso.cgroup_memory is None:
+            # Address space, not resident memory: generous, since numba and BLAS reserve a lot.
+            space = 4 * limits.memory_mib * mib
+            resource.setrlimit(resource.RLIMIT_AS, (space, space))
+
+    return apply
+
+
+def command(iso: Isolation, *, work: Path, code: Path | None, map_dir: Path,
+            child_args: list[str]) -> list[str]:
+    """The command line that starts the planner process."""
+    python = [sys.executable, "-s", "-B", "-m", "worker.sandbox.child", *child_args]
+    if not (iso.bwrap and iso.namespaces):
+        return python
+    args = [iso.bwrap, "--die-with-parent", "--new-session", "--unshare-all",
+            "--uid", "65534", "--gid", "65534", "--hostname", "sandbox",
+            "--ro-bind", "/usr", "/usr", "--proc", "/proc", "--dev", "/dev", "--tmpfs", "/tmp"]
+    for link in ("bin", "lib", "lib64", "sbin"):
+        target = Path("/") / link
+        if target.is_symlink():
+            args += ["--symlink", os.readlink(target), str(target)]
+        elif target.is_dir():
+            args += ["--ro-bind", str(target), str(target)]
+    for prefix in {sys.base_prefix, sys.prefix}:
+        args += ["--ro-bind", prefix, prefix]
+    for package in VISIBLE_PACKAGES:
+        path = PROJECT_ROOT / package
+        args += ["--ro-bind", str(path), str(path)]
+    args += ["--bind", str(work), "/sandbox/work", "--ro-bind", str(map_dir), "/sandbox/map"]
+    if code is not None:
+        args += ["--ro-bind", str(code), "/sandbox/code"]
+    args += ["--chdir", "/sandbox/work", "--clearenv", "--setenv", "HOME", "/sandbox/work",
+             "--setenv", "PYTHONPATH", str(PROJECT_ROOT), "--setenv", "OMP_NUM_THREADS", "1",
+             "--setenv", "NUMBA_NUM_THREADS", "1", "--setenv", "OPENBLAS_NUM_THREADS", "1",
+             "--setenv", "NUMBA_CACHE_DIR", "/sandbox/work/.numba-cache", "--", *python]
+    return args
+
+
+def seed_numba_cache(work: Path) -> Path:
+    """Copy the project's compiled numba kernels into a writable cache in the working folder.
+
+    Numba uses a source folder's `__pycache__` only when it may write there, which the planner
+    process may not; without this copy it would compile every kernel again, for seconds, in its
+    first planning call. Returns the folder to pass as `NUMBA_CACHE_DIR`.
+    """
+    cache = work / ".numba-cache"
+    for package in VISIBLE_PACKAGES:
+        for pycache in (PROJECT_ROOT / package).rglob("__pycache__"):
+            kernels = list(pycache.glob("*.nb[ic]"))
+            if not kernels:
+                continue
+            source_dir = str(pycache.parent)
+            digest = hashlib.sha1(source_dir.encode()).hexdigest()  # numba's own layout
+            target = cache / f"{pycache.parent.name}_{digest}"
+            target.mkdir(parents=True, exist_ok=True)
+            for kernel in kernels:
+                shutil.copyfile(kernel, target / kernel.name)
+    for path in [cache, *cache.rglob("*")]:
+        path.chmod(0o777 if path.is_dir() else 0o666)
+    return cache
+
+
+def child_paths(iso: Isolation, *, work: Path, code: Path | None,
+                map_file: Path) -> tuple[str, str | None]:
+    """The map file and code folder as the planner process sees them."""
+    if iso.bwrap and iso.namespaces:
+        return "/sandbox/map/" + map_file.name, "/sandbox/code" if code is not None else None
+    return str(map_file), str(code) if code is not None else None

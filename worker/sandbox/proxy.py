@@ -1,0 +1,260 @@
+"""`SandboxedPlanner`: a planner whose code runs in an isolated process.
+
+The episode runner calls `reset` and `plan` as on any planner. Each call becomes one JSON
+message on a pipe; the map goes through a shared memory file that the planner process can only
+read. Every failure (crash, hang, limit, protocol breach, exception) raises `SandboxError` with a
+reason for the run's record; the planner's stderr tail goes to the run log only.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import select
+import shutil
+import signal
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sim.interface import Observation, Plan, PlannerContext
+from sim.occupancy import DirtyBoxSubscription, IndexBox
+from worker.sandbox import isolation
+from worker.sandbox.isolation import SandboxLimits
+from worker.sandbox.protocol import (
+    MAX_MESSAGE_BYTES,
+    ProtocolError,
+    decode_plan,
+    encode_context,
+    encode_observation,
+    parse_message,
+)
+
+log = logging.getLogger(__name__)
+STDERR_TAIL_BYTES = 4000
+_SIGNALS = {signal.SIGXCPU: "exceeded its CPU time limit",
+            signal.SIGXFSZ: "exceeded its file size limit (too much output)",
+            signal.SIGSEGV: "crashed (segmentation fault)"}
+
+
+class SandboxError(RuntimeError):
+    """The sandboxed planner failed; the message is the reason recorded for the run."""
+
+
+class SandboxedPlanner:
+    """Runs `planner.py` from `code` (or built-in planner `builtin`) in a sandbox."""
+
+    def __init__(self, *, code: Path | None = None, builtin: str | None = None,
+                 limits: SandboxLimits | None = None) -> None:
+        if (code is None) == (builtin is None):
+            raise ValueError("give exactly one of code and builtin")
+        self.code, self.builtin = code, builtin
+        self.limits = limits or SandboxLimits()
+        self.iso = isolation.probe()
+        self.proc: subprocess.Popen[bytes] | None = None
+        self.tmp = Path(tempfile.mkdtemp(prefix="flybo-sbx-"))
+        self.shm_dir = Path(tempfile.mkdtemp(prefix="flybo-map-", dir=_shm_root()))
+        self.work = self.tmp / "work"
+        self.work.mkdir()
+        os.chmod(self.work, 0o777)  # the planner runs as an unprivileged user in its namespace
+        self.stderr_path = self.tmp / "stderr.log"
+        self.cgroups: isolation.Cgroups | None = None
+        self.shared: np.memmap[Any, np.dtype[np.uint8]] | None = None
+        self.subscription: DirtyBoxSubscription | None = None
+        self.planning_s = 0.0
+        self._buffer = b""
+
+    # -- lifecycle -------------------------------------------------------------------------
+
+    def __enter__(self) -> SandboxedPlanner:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self.proc is not None:
+            if self.proc.poll() is None:
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(self.proc.pid, signal.SIGKILL)
+            self.proc.wait()
+            for stream in (self.proc.stdin, self.proc.stdout):
+                if stream is not None:
+                    stream.close()
+        if self.cgroups is not None:
+            self.cgroups.cleanup()
+        self.shared = None
+        shutil.rmtree(self.tmp, ignore_errors=True)
+        shutil.rmtree(self.shm_dir, ignore_errors=True)
+
+    def stderr_tail(self) -> str:
+        try:
+            with self.stderr_path.open("rb") as fh:
+                fh.seek(max(0, self.stderr_path.stat().st_size - STDERR_TAIL_BYTES))
+                return fh.read().decode(errors="replace")
+        except OSError:
+            return ""
+
+    def _start(self) -> None:
+        """Start the planner process and load the planner (not charged to planning time)."""
+        map_file = self.shm_dir / "map.u8"
+        os.chmod(self.shm_dir, 0o755)  # the map file appears here at the first `plan`
+        child_map, child_code = isolation.child_paths(self.iso, work=self.work, code=self.code,
+                                                      map_file=map_file)
+        to_child_r, to_child_w = os.pipe()
+        from_child_r, from_child_w = os.pipe()
+        source = ["--code", child_code] if child_code else ["--builtin", str(self.builtin)]
+        args = isolation.command(
+            self.iso, work=self.work, code=self.code, map_dir=self.shm_dir,
+            child_args=["--fd-in", str(to_child_r), "--fd-out", str(from_child_w),
+                        "--map", child_map, *source])
+        numba_cache = isolation.seed_numba_cache(self.work)
+        self.cgroups = isolation.make_cgroups(self.iso, self.limits)
+        env = {"PATH": "/usr/bin:/bin", "HOME": str(self.work),
+               "PYTHONPATH": str(isolation.PROJECT_ROOT), "OMP_NUM_THREADS": "1",
+               "NUMBA_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
+               "NUMBA_CACHE_DIR": str(numba_cache)}
+        with self.stderr_path.open("wb") as err:
+            self.proc = subprocess.Popen(
+                args, stdin=subprocess.DEVNULL, stdout=err, stderr=err, env=env,
+                cwd=self.work, pass_fds=(to_child_r, from_child_w), start_new_session=True,
+                preexec_fn=isolation.preexec(self.limits, self.cgroups, self.iso))
+        os.close(to_child_r)
+        os.close(from_child_w)
+        self._to = os.fdopen(to_child_w, "wb")
+        self._from = from_child_r
+        hello = self._receive(self.limits.start_timeout_s, "start")
+        if not hello.get("ok"):
+            raise SandboxError(str(hello.get("error", "the planner failed to load"))[:500])
+
+    # -- the planner API -------------------------------------------------------------------
+
+    def reset(self, ctx: PlannerContext) -> None:
+        if self.proc is None:
+            self._start()
+        # The planner's own reset waits for the first observation, which gives the grid.
+        self._ctx = ctx
+        self._pending_reset = True
+
+    def plan(self, obs: Observation) -> Plan:
+        view = obs.map
+        if self._pending_reset:
+            shape = (int(view.shape[0]), int(view.shape[1]), int(view.shape[2]))
+            map_file = self.shm_dir / "map.u8"
+            self.shared = np.memmap(map_file, dtype=np.uint8, mode="w+", shape=shape)
+            os.chmod(map_file, 0o644)
+            self.subscription = view.occupancy_map.subscribe()
+            box: IndexBox | None = IndexBox.full(shape)
+        else:
+            box = self.subscription.take() if self.subscription is not None else None
+        assert self.shared is not None
+        if box is not None:
+            region = box.slices()
+            self.shared[region] = view.state[region]
+        if self._pending_reset:
+            self._call({"op": "reset", "ctx": encode_context(self._ctx),
+                        "grid": {"shape": list(view.shape), "origin": view.origin.tolist(),
+                                 "voxel_size": view.voxel_size}}, "reset")
+            self._pending_reset = False
+        reply = self._call({"op": "plan", "obs": encode_observation(obs),
+                            "box": None if box is None else [list(box.lo), list(box.hi)]},
+                           "plan")
+        try:
+            return decode_plan(reply.get("plan"))
+        except ProtocolError as exc:
+            raise SandboxError(f"the planner returned an invalid plan: {exc}") from None
+
+    # -- the pipe ----------------------------------------------------------------------------
+
+    def _call(self, message: dict[str, Any], what: str) -> dict[str, Any]:
+        from worker.sandbox.protocol import write_message
+
+        started = time.monotonic()
+        try:
+            write_message(self._to, message)
+        except (BrokenPipeError, OSError):
+            raise SandboxError(self._death_reason(what)) from None
+        budget = min(self.limits.plan_timeout_s,
+                     self.limits.run_planning_budget_s - self.planning_s)
+        reply = self._receive(max(budget, 0.0), what)
+        self.planning_s += time.monotonic() - started
+        if not reply.get("ok"):
+            raise SandboxError(f"the planner's {what} raised {reply.get('error', '?')}"[:1000])
+        return reply
+
+    def _receive(self, timeout: float, what: str) -> dict[str, Any]:
+        deadline = time.monotonic() + timeout
+        while b"\n" not in self._buffer:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                self._kill()
+                if self.planning_s + timeout >= self.limits.run_planning_budget_s:
+                    raise SandboxError(f"the planner used up its planning budget of "
+                                       f"{self.limits.run_planning_budget_s:g} s for the run")
+                raise SandboxError(f"the planner's {what} took longer than {timeout:g} s")
+            ready, _, _ = select.select([self._from], [], [], left)
+            if not ready:
+                continue
+            chunk = os.read(self._from, 1 << 20)
+            if not chunk:
+                raise SandboxError(self._death_reason(what))
+            self._buffer += chunk
+            if len(self._buffer) > isolation_limit():
+                self._kill()
+                raise SandboxError("the planner sent a message larger than "
+                                   f"{MAX_MESSAGE_BYTES} bytes")
+        line, _, self._buffer = self._buffer.partition(b"\n")
+        try:
+            return parse_message(line + b"\n")
+        except ProtocolError as exc:
+            self._kill()
+            raise SandboxError(f"the planner broke the protocol: {exc}") from None
+
+    def _kill(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            self.proc.wait()
+
+    def _death_reason(self, what: str) -> str:
+        assert self.proc is not None
+        try:
+            code = self.proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            self._kill()
+            code = self.proc.returncode
+        tail = self.stderr_tail().strip().splitlines()[-20:]
+        if tail:
+            log.warning("planner stderr (last lines):\n%s", "\n".join(tail))
+        try:
+            written = self.stderr_path.stat().st_size
+        except OSError:
+            written = 0
+        if written >= self.limits.file_size_mib * 1024 * 1024 - 1_000_000:
+            return (f"the planner process exceeded its file size limit (too much output, "
+                    f"{self.limits.file_size_mib} MiB) during {what}")
+        if self.cgroups is not None and self.cgroups.oom_killed():
+            return f"the planner exceeded its memory limit of {self.limits.memory_mib} MiB"
+        if "Resource temporarily unavailable" in self.stderr_tail() or (
+                "fork" in self.stderr_tail() and "BlockingIOError" in self.stderr_tail()):
+            return f"the planner exceeded its process limit of {self.limits.processes}"
+        if code is not None and code < 0:
+            sig = signal.Signals(-code)
+            reason = _SIGNALS.get(sig, f"was killed by {sig.name}")
+            if sig == signal.SIGKILL and self.iso.cgroup_memory is None:
+                reason = "was killed (memory or another limit)"
+            return f"the planner process {reason} during {what}"
+        return f"the planner process exited (code {code}) during {what}"
+
+
+def isolation_limit() -> int:
+    return MAX_MESSAGE_BYTES + 1
+
+
+def _shm_root() -> str | None:
+    return "/dev/shm" if os.path.isdir("/dev/shm") and os.access("/dev/shm", os.W_OK) else None
