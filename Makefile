@@ -3,7 +3,7 @@ PYTHON ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
-SYSTEM_LIBS := libusb-1.0-0 libgl1 libegl1 libgomp1
+SYSTEM_LIBS := libusb-1.0-0 libgl1 libegl1 libgomp1 bubblewrap
 # Browser tests drive Debian's Chromium through Playwright (never a downloaded browser).
 TEST_SYSTEM_PACKAGES := chromium
 
@@ -11,7 +11,8 @@ TEST_SYSTEM_PACKAGES := chromium
 
 install: $(STAMP)
 
-# Open3D's wheels link against these shared libraries; install whichever are missing.
+# Open3D's wheels link against these shared libraries, and the planner sandbox runs in
+# bubblewrap; install whichever are missing.
 system-deps:
 	@$(MAKE) --no-print-directory apt-packages PACKAGES="$(SYSTEM_LIBS)"
 
