@@ -107,6 +107,13 @@ def _serve(reader: IO[bytes], writer: IO[bytes], map_path: str, planner: Any) ->
                                     float(message["ctx"]["safety_radius_m"]))
                 planner.reset(decode_context(message["ctx"]))
                 reply: dict[str, Any] = {"ok": True}
+            elif message["op"] == "sync" and stack is not None:
+                box = message["box"]
+                stack.occupancy.load(shared, IndexBox(tuple(box[0]), tuple(box[1])))
+                view = stack.view()
+                view.traversable  # noqa: B018 - bring the trackers up to date now
+                view.frontier  # noqa: B018
+                continue  # no reply: the runner does not wait for syncs
             elif message["op"] == "plan" and stack is not None:
                 box = message.get("box")
                 if box is not None:

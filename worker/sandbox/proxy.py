@@ -16,6 +16,7 @@ import shutil
 import signal
 import subprocess
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -68,6 +69,12 @@ class SandboxedPlanner:
         self.subscription: DirtyBoxSubscription | None = None
         self.planning_s = 0.0
         self._buffer = b""
+        # Between plans, a thread sends the map's changes so that the planner process updates
+        # its frontiers and clearance while the vehicle flies, as the runner's own trackers do,
+        # instead of inside the timed `plan` call.
+        self._lock = threading.Lock()
+        self._stop_sync = threading.Event()
+        self._sync_thread: threading.Thread | None = None
 
     # -- lifecycle -------------------------------------------------------------------------
 
@@ -78,6 +85,9 @@ class SandboxedPlanner:
         self.close()
 
     def close(self) -> None:
+        self._stop_sync.set()
+        if self._sync_thread is not None:
+            self._sync_thread.join(timeout=5)
         if self.proc is not None:
             if self.proc.poll() is None:
                 with contextlib.suppress(ProcessLookupError):
@@ -151,16 +161,18 @@ class SandboxedPlanner:
             self.subscription = view.occupancy_map.subscribe()
             box: IndexBox | None = IndexBox.full(shape)
         else:
-            box = self.subscription.take() if self.subscription is not None else None
+            with self._lock:
+                box = self._copy_changes(view.state)
         assert self.shared is not None
-        if box is not None:
-            region = box.slices()
-            self.shared[region] = view.state[region]
         if self._pending_reset:
+            self.shared[:] = view.state
             self._call({"op": "reset", "ctx": encode_context(self._ctx),
                         "grid": {"shape": list(view.shape), "origin": view.origin.tolist(),
                                  "voxel_size": view.voxel_size}}, "reset")
             self._pending_reset = False
+            self._sync_thread = threading.Thread(target=self._sync_loop, args=(view.state,),
+                                                 name="sandbox-map-sync", daemon=True)
+            self._sync_thread.start()
         reply = self._call({"op": "plan", "obs": encode_observation(obs),
                             "box": None if box is None else [list(box.lo), list(box.hi)]},
                            "plan")
@@ -169,6 +181,28 @@ class SandboxedPlanner:
         except ProtocolError as exc:
             raise SandboxError(f"the planner returned an invalid plan: {exc}") from None
 
+    def _copy_changes(self, state: Any) -> IndexBox | None:
+        """Copy the voxels changed since the last copy into shared memory (hold the lock)."""
+        box = self.subscription.take() if self.subscription is not None else None
+        if box is not None and self.shared is not None:
+            region = box.slices()
+            self.shared[region] = state[region]
+        return box
+
+    def _sync_loop(self, state: Any, period_s: float = 0.2) -> None:
+        from worker.sandbox.protocol import write_message
+
+        while not self._stop_sync.wait(period_s):
+            with self._lock:
+                box = self._copy_changes(state)
+                if box is None:
+                    continue
+                try:
+                    write_message(self._to, {"op": "sync",
+                                             "box": [list(box.lo), list(box.hi)]})
+                except (OSError, ValueError):
+                    return  # the process is gone; the next plan call reports why
+
     # -- the pipe ----------------------------------------------------------------------------
 
     def _call(self, message: dict[str, Any], what: str) -> dict[str, Any]:
@@ -176,8 +210,9 @@ class SandboxedPlanner:
 
         started = time.monotonic()
         try:
-            write_message(self._to, message)
-        except (BrokenPipeError, OSError):
+            with self._lock:
+                write_message(self._to, message)
+        except (BrokenPipeError, OSError, ValueError):
             raise SandboxError(self._death_reason(what)) from None
         budget = min(self.limits.plan_timeout_s,
                      self.limits.run_planning_budget_s - self.planning_s)

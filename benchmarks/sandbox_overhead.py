@@ -1,0 +1,69 @@
+"""Per-iteration planning time of Classic on MAZE in process and in the sandbox.
+
+Same seed and preset `exact` (planning time not charged, so both runs fly the same path and
+make the same calls); the target is a median at most 5 ms above in-process. Run pinned to one
+core for the planner side: `taskset -c 0 .venv/bin/python benchmarks/sandbox_overhead.py`
+(the sandboxed planner process inherits the mask).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import print_table, write_json
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--seconds", type=float, default=300.0)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    from areas import load_area, load_ground_truth
+    from planners.registry import make
+    from sim.config import preset
+    from sim.episode import run_episode
+    from worker.sandbox.isolation import probe
+    from worker.sandbox.proxy import SandboxedPlanner
+
+    area = load_area("maze")
+    truth = load_ground_truth(area)
+    config = preset("exact")
+    t0 = time.perf_counter()
+    direct = run_episode(area, truth, make("classic"), config, args.seed, seconds=args.seconds)
+    t1 = time.perf_counter()
+    with SandboxedPlanner(builtin="classic") as planner:
+        boxed = run_episode(area, truth, planner, config, args.seed, seconds=args.seconds)
+    t2 = time.perf_counter()
+    rows = []
+    summary = {}
+    for name, result, wall in (("in process", direct, t1 - t0), ("sandbox", boxed, t2 - t1)):
+        ms = np.asarray(result.planning_times_ms)
+        later = ms[1:]  # the first call includes the planner process's warm-up
+        summary[name] = {"iterations": int(result.iterations),
+                         "median_ms": float(np.median(later)),
+                         "p90_ms": float(np.percentile(later, 90)),
+                         "first_call_ms": float(ms[0]), "wall_s": wall,
+                         "explored_m3": float(result.explored_volume_m3)}
+        rows.append([name, result.iterations, f"{np.median(later):.2f}",
+                     f"{np.percentile(later, 90):.2f}", f"{ms[0]:.0f}", f"{wall:.1f}",
+                     f"{result.explored_volume_m3:.1f}"])
+    overhead = summary["sandbox"]["median_ms"] - summary["in process"]["median_ms"]
+    print_table(f"Classic on MAZE, {args.seconds:g} s, seed {args.seed}, preset exact",
+                ["planner runs", "iterations", "median ms", "p90 ms", "first call ms",
+                 "wall s", "explored m³"], rows)
+    print(f"\nmedian overhead of the sandbox: {overhead:+.2f} ms (target <= +5 ms); "
+          f"isolation notes: {probe().notes or 'none'}")
+    path = write_json("sandbox_overhead", {"seconds": args.seconds, "seed": args.seed,
+                                           "runs": summary, "median_overhead_ms": overhead,
+                                           "target_ms": 5.0})
+    print(f"written {path}")
+
+
+if __name__ == "__main__":
+    main()
