@@ -2,14 +2,21 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from fastapi import FastAPI
 
+STATIC = Path(__file__).resolve().parent / "static"
+
 
 def install_web(app: FastAPI) -> None:
     """Mount the website's routes and static files on the service's app."""
-    from web.pages import router
+    from fastapi.staticfiles import StaticFiles
 
-    app.include_router(router)
+    from web import areas_page, jobs_page, leaderboard_page, planners_page, run_page
+
+    for module in (leaderboard_page, areas_page, planners_page, jobs_page, run_page):
+        app.include_router(module.router)
+    app.mount("/static", StaticFiles(directory=STATIC), name="static")

@@ -1,0 +1,132 @@
+"""Every page through the app, without a browser: status codes, escaping, security headers,
+the tables' numbers, and the curves and Pareto set the figures are drawn from."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from tests.web.conftest import Site
+from tests.web.stored import HOSTILE
+
+
+def _html(site: Site, path: str, status: int = 200) -> str:
+    response = site.client.get(path)
+    assert response.status_code == status, (path, response.text[:300])
+    assert response.headers["content-type"].startswith("text/html")
+    csp = response.headers["content-security-policy"]
+    assert "script-src 'self'" in csp and "unsafe-inline" not in csp
+    text = response.text
+    # No inline script, style or event handler: the policy would block them.
+    assert not re.search(r"<script(?![^>]*\ssrc=)[^>]*>", text), path
+    assert not re.search(r"<[^>]+\s(on\w+|style)=", text), path
+    assert "<style" not in text
+    assert HOSTILE not in text and "<b>evil</b>" not in text, path
+    return text
+
+
+def test_every_page_answers(site: Site) -> None:
+    run = site.ids["alpha_run"]
+    for path in ["/", "/?preset=default&area=maze", "/?preset=exact", "/?preset=nothing-here",
+                 "/areas", "/planners", "/planners/alpha", "/planners/beta-v1", "/jobs",
+                 "/jobs?offset=50", f"/jobs/{site.ids['alpha_job']}", f"/runs/{run}",
+                 f"/runs/{site.ids['evil_run']}"]:
+        _html(site, path)
+    for path in ["/planners/teleport", "/jobs/99999", "/jobs/abc", "/jobs/1e3", "/runs/0",
+                 "/runs/x", "/runs/99999999999999999999", "/areas/atlantis/thumbnail.png"]:
+        assert "Not found" in _html(site, path, 404)
+    assert site.client.get("/static/vendor/uplot/uPlot.iife.min.js").status_code == 200
+    assert site.client.get("/static/js/charts.js").status_code == 200
+    assert site.client.get("/static/nothing.js").status_code == 404
+
+
+def test_hostile_strings_are_escaped(site: Site) -> None:
+    escaped = "&lt;script&gt;alert(&#x27;x&#x27;)&lt;/script&gt;"
+    assert escaped in _html(site, "/planners/beta")
+    assert "&lt;b&gt;evil&lt;/b&gt;-v1" in _html(site, "/?preset=exact")
+    assert escaped in _html(site, "/areas")
+    assert "&lt;b&gt;evil&lt;/b&gt;-v1" in _html(site, f"/runs/{site.ids['evil_run']}")
+    # A hostile query value is shown escaped (or not at all).
+    assert "<x>" not in _html(site, "/?preset=%3Cx%3E&area=%3Cx%3E")
+
+
+def test_leaderboard_tables(site: Site) -> None:
+    text = _html(site, "/?area=maze")
+    coverage = text[text.index("id='coverage-table'"):text.index("id='surface-table'")]
+    # Overall order by coverage rank on the one scored area: beta 0.9, alpha 0.7, gamma 0.5;
+    # the failed run of alpha (0.99) counts nowhere.
+    order = re.findall(r"data-planner='([^']+)'", coverage)
+    assert order == ["beta-v1", "alpha-v1", "gamma-v1"]
+    alpha_row = coverage[coverage.index("data-planner='alpha-v1'"):]
+    alpha_row = alpha_row[:alpha_row.index("</tr>")]
+    assert ">70.0<span class='range'>60.0–80.0</span>" in alpha_row  # mean; min-max
+    assert "baseline" in alpha_row
+    beta_row = coverage[coverage.index("data-planner='beta-v1'"):]
+    assert "baseline" not in beta_row[:beta_row.index("</tr>")]  # uploaded, not built in
+    # Pareto: beta leads coverage, alpha leads F-score; gamma is beaten by both.
+    assert re.search(r"data-planner='alpha-v1'[^>]*data-pareto='1'", coverage)
+    assert re.search(r"data-planner='gamma-v1'[^>]*data-pareto='0'", coverage)
+    table4 = text[text.index("id='area-table'"):]
+    assert "Table 4: planning on maze" in table4 and "alpha-v1" in table4
+    assert "id='volume-chart'" in text and "data-area='maze'" in text
+    assert "No results yet." in _html(site, "/?preset=nothing-here")
+    assert f"href='/jobs/{site.ids['alpha_job']}'" in text  # recent jobs
+
+
+def test_leaderboard_api_marks_the_pareto_set(site: Site) -> None:
+    board = site.client.get("/api/v1/leaderboard", params={"area": "maze"}).json()
+    pareto = {p["planner"]: p["pareto"] for p in board["overall"]}
+    assert pareto == {"alpha-v1": True, "beta-v1": True, "gamma-v1": False}
+    alpha = next(p for p in board["overall"] if p["planner"] == "alpha-v1")
+    assert alpha["mean_rmse_m"] == pytest.approx(0.02)
+
+
+def test_curves_aggregate_runs_of_different_lengths(site: Site) -> None:
+    body = site.client.get("/api/v1/curves", params={"area": "maze"}).json()
+    assert body["area"] == "maze" and body["plateau_s"] == 700
+    by = {p["planner"]: p for p in body["planners"]}
+    assert set(by) == {"alpha-v1", "beta-v1", "gamma-v1"}
+    alpha = by["alpha-v1"]
+    assert alpha["runs"] == 2 and alpha["builtin"]  # the failed run is not there
+    assert alpha["time_s"] == [0, 1, 2, 3, 4]
+    volume = alpha["explored_volume_m3"]
+    # Runs [0,1,2,3,4] and [0,2,4]: both up to 2 s, then only the longer one.
+    assert volume["mean"] == [0, 1.5, 3, 3, 4]
+    assert volume["min"] == [0, 1, 2, 3, 4]
+    assert volume["max"] == [0, 2, 4, 3, 4]
+    assert alpha["recall_time_s"] == [20, 40]
+    assert alpha["surface_recall"]["mean"] == pytest.approx([0.15, 0.3])
+    thin = site.client.get("/api/v1/curves", params={"area": "maze", "max_points": 10}).json()
+    assert len(thin["planners"][0]["time_s"]) <= 10
+    assert site.client.get("/api/v1/curves", params={"area": "atlantis"}).status_code == 404
+    empty = site.client.get("/api/v1/curves", params={"area": "maze", "preset": "fast"})
+    assert empty.json()["planners"] == []
+
+
+def test_run_page(site: Site) -> None:
+    run = site.ids["alpha_run"]
+    text = _html(site, f"/runs/{run}")
+    assert f"href='/runs/{run}/replay'" in text and "Open 3D replay" in text
+    assert f"href='/api/v1/runs/{run}/artifacts/mesh'" in text
+    assert "F-score, %" in text and "50.00" in text
+    assert "<label for='token'>API token</label>" in text
+    assert "line one" not in text  # the log is only fetched with the owner's token
+    log = site.client.get(f"/api/v1/runs/{run}/log",
+                          headers={"Authorization": f"Bearer {site.token}"})
+    assert log.status_code == 200 and "line one" in log.text
+
+
+def test_job_planner_and_areas_pages(site: Site) -> None:
+    job = _html(site, f"/jobs/{site.ids['alpha_job']}")
+    assert "data-final='1'" in job and job.count("<tr data-run=") == 3
+    assert "<progress max='1' value='1.0000'" in job
+    planner = _html(site, "/planners/alpha")
+    assert "&quot;step_m&quot;: 1.0" in planner  # the config, as JSON
+    assert "alpha-v1" in planner and "id='runs-table'" in planner
+    beta = _html(site, "/planners/beta")
+    assert "<dd>alice</dd>" in beta  # the owner
+    areas = _html(site, "/areas")
+    assert "src='/areas/maze/thumbnail.png'" in areas and "20 × 20 × 2.5" in areas
+    jobs = _html(site, "/jobs")
+    assert f"href='/jobs/{site.ids['alpha_job']}'" in jobs

@@ -1,0 +1,116 @@
+"""Planner pages: the list, and one planner's description, config, versions and results."""
+
+from __future__ import annotations
+
+import json
+
+from fastapi import APIRouter
+from fastapi.responses import HTMLResponse
+from sqlalchemy import select
+
+from server.catalog import CatalogError, find_planner
+from server.deps import SessionDep
+from server.leaderboard import build_leaderboard
+from server.models import AreaRow, Job, PlannerRow, Run, RunResult, User
+from web.html import (
+    DASH,
+    esc,
+    not_found,
+    num,
+    page,
+    planner_link,
+    spread_td,
+    status_badge,
+    table,
+    td,
+)
+
+router = APIRouter(include_in_schema=False)
+MAX_RUNS = 200
+
+
+@router.get("/planners", response_class=HTMLResponse)
+def planners_page(session: SessionDep) -> HTMLResponse:
+    found = session.execute(select(PlannerRow, User.name).outerjoin(
+        User, PlannerRow.owner_id == User.id).order_by(PlannerRow.name, PlannerRow.version))
+    rows = [f"<tr>{td(planner_link(r.key, r.builtin), r.key)}{td(esc(owner or DASH))}"
+            f"{td(esc(r.description))}{td(esc(r.reference))}</tr>" for r, owner in found]
+    body = ("<h1>Planners</h1>"
+            + table("Registered planners and their versions",
+                    [("Planner", ""), ("Owner", ""), ("Description", ""), ("Reference", "")],
+                    rows, empty="No planners are registered."))
+    return page("Planners", body, scripts=("sort.js",), current="/planners")
+
+
+def _runs_table(session: SessionDep, planner_id: int) -> str:
+    found = session.execute(
+        select(Run, AreaRow.name, RunResult).join(Job, Run.job_id == Job.id)
+        .join(AreaRow, Run.area_id == AreaRow.id)
+        .outerjoin(RunResult, RunResult.run_id == Run.id)
+        .where(Job.planner_id == planner_id).order_by(Run.id.desc()).limit(MAX_RUNS))
+    rows = []
+    for run, area, result in found:
+        r = result
+        rows.append("<tr>" + "".join([
+            td(f"<a href='/runs/{run.id}'>{run.id}</a>", run.id, "num"),
+            td(f"<a href='/jobs/{run.job_id}'>{run.job_id}</a>", run.job_id, "num"),
+            td(esc(area), area), td(str(run.seed), run.seed, "num"), td(esc(run.preset)),
+            td(status_badge(run.status), run.status),
+            td(num(r.coverage if r else None, 1, 100), r.coverage if r else None, "num"),
+            td(num(r.fscore if r else None, 1, 100), r.fscore if r else None, "num"),
+            td(num(r.rmse_m if r else None, 2, 100), r.rmse_m if r else None, "num"),
+            td(num(r.path_length_m if r else None, 1), r.path_length_m if r else None, "num"),
+        ]) + "</tr>")
+    return table(f"Runs (newest {MAX_RUNS})", [
+        ("Run", ""), ("Job", ""), ("Area", ""), ("Seed", ""), ("Preset", ""), ("Status", ""),
+        ("Coverage, %", ""), ("F-score, %", ""), ("RMSE, cm", ""), ("Path, m", "")],
+        rows, table_id="runs-table", empty="No runs yet.")
+
+
+def _results(session: SessionDep, key: str, presets: list[str]) -> str:
+    parts = []
+    for preset in presets:
+        board = build_leaderboard(session, preset)
+        mine = [e for e in board.entries if e.planner == key]
+        overall = next((p for p in board.overall if p.planner == key), None)
+        rows = ["<tr>" + "".join([
+            td(f"<a href='/?preset={esc(preset)}&amp;area={esc(e.area)}'>{esc(e.area)}</a>",
+               e.area), td(str(e.runs), e.runs, "num"), spread_td(e.coverage, 1, 100),
+            spread_td(e.fscore, 1, 100), spread_td(e.rmse_m, 2, 100),
+            td(num(e.coverage_rank, 1), e.coverage_rank, "num"),
+            td(num(e.fscore_rank, 1), e.fscore_rank, "num")]) + "</tr>" for e in mine]
+        rank = f"overall rank {overall.rank} of {len(board.overall)}" if overall else ""
+        parts.append(table(f"Preset {preset}: {rank}", [
+            ("Area", ""), ("Runs", ""), ("Coverage, %", ""), ("F-score, %", ""),
+            ("RMSE, cm", ""), ("Coverage rank", ""), ("F-score rank", "")], rows))
+    return "".join(parts) or "<p>No succeeded runs yet.</p>"
+
+
+@router.get("/planners/{name}", response_class=HTMLResponse)
+def planner_page(name: str, session: SessionDep) -> HTMLResponse:
+    try:
+        row = find_planner(session, name)
+    except CatalogError:
+        return not_found(f"No planner named {name}.")
+    owner = session.get(User, row.owner_id) if row.owner_id is not None else None
+    versions = session.scalars(select(PlannerRow).where(PlannerRow.name == row.name)
+                               .order_by(PlannerRow.version)).all()
+    links = ", ".join(f"<a href='/planners/{esc(v.key)}'"
+                      f"{' aria-current=page' if v.id == row.id else ''}>{esc(v.key)}</a>"
+                      for v in versions)
+    presets = sorted(set(session.scalars(
+        select(Run.preset).join(Job, Run.job_id == Job.id)
+        .where(Job.planner_id == row.id).distinct())))
+    config = json.dumps(row.config.get("defaults", row.config), indent=2, sort_keys=True)
+    body = (
+        f"<h1>{esc(row.key)}{' <span class=badge>baseline</span>' if row.builtin else ''}</h1>"
+        f"<p class='lead'>{esc(row.description) or 'No description.'}</p>"
+        "<dl class='facts'>"
+        f"<dt>Reference</dt><dd>{esc(row.reference) or DASH}</dd>"
+        f"<dt>Owner</dt><dd>{esc(owner.name) if owner else 'built in'}</dd>"
+        f"<dt>Versions</dt><dd>{links}</dd>"
+        f"<dt>Code hash</dt><dd><code>{esc(row.code_hash) or DASH}</code></dd></dl>"
+        f"<h2>Configuration (defaults)</h2><pre class='config'>{esc(config)}</pre>"
+        f"<h2>Results</h2>{_results(session, row.key, presets)}"
+        f"{_runs_table(session, row.id)}")
+    return page(row.key, body, scripts=("sort.js",), current="/planners")
