@@ -19,6 +19,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from server.catalog import sync_builtin_areas, sync_builtin_planners
 from server.db import make_engine, make_session_factory, session_scope
+from server.middleware import install_middleware
 from server.migrate import upgrade
 from server.routes import areas, curves, health, jobs, leaderboard, planners, runs
 from server.settings import Settings, load_settings
@@ -78,6 +79,7 @@ def create_app(settings: Settings | None = None, *, sweeper: bool = True,
     for router in (areas.router, planners.router, jobs.router, runs.router,
                    leaderboard.router, curves.router):
         app.include_router(router, prefix=API_PREFIX)
+    install_middleware(app, settings)
     from web import install_web  # the website reads through the server's layer
 
     install_web(app)

@@ -42,6 +42,13 @@ class Settings(BaseSettings):
     max_runs_per_job: int = Field(default=200, ge=1)
     max_seconds_per_run: float = Field(default=3600.0, gt=0)
 
+    # HTTP protections (server/middleware.py).
+    rate_limit_writes_per_minute: float = Field(default=120.0, ge=0, description="0: off")
+    rate_limit_auth_failures_per_minute: float = Field(default=30.0, gt=0)
+    rate_limit_burst: int = Field(default=60, ge=1)
+    cors_origins: list[str] = Field(default_factory=list,
+                                    description="origins allowed cross-origin; none by default")
+
     # Uploaded planners and the sandbox.
     max_planner_upload_mib: float = Field(default=1.0, gt=0)
     max_planner_unpacked_mib: float = Field(default=10.0, gt=0)
