@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import Annotated
 
-from fastapi import Depends, HTTPException, Request
+from fastapi import Depends, HTTPException, Path, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -60,6 +60,8 @@ def optional_user(
 
 
 UserDep = Annotated[User, Depends(current_user)]
+# Database ids are 32-bit on every backend: a larger number names nothing (404 rather than 500).
+IdPath = Annotated[int, Path(ge=1, le=2**31 - 1, description="an id")]
 OptionalUserDep = Annotated[User | None, Depends(optional_user)]
 
-__all__ = ["OptionalUserDep", "SessionDep", "SettingsDep", "UserDep", "utcnow"]
+__all__ = ["IdPath", "OptionalUserDep", "SessionDep", "SettingsDep", "UserDep", "utcnow"]

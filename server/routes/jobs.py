@@ -9,7 +9,7 @@ from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import selectinload
 
-from server.deps import SessionDep, SettingsDep, UserDep
+from server.deps import IdPath, SessionDep, SettingsDep, UserDep
 from server.jobs import (
     Created,
     JobError,
@@ -87,7 +87,7 @@ def submit_job(
 def list_jobs(
     session: SessionDep,
     limit: Annotated[int, Query(ge=1, le=200)] = 50,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    offset: Annotated[int, Query(ge=0, le=2**31 - 1)] = 0,
     planner: Annotated[str | None, Query(max_length=80)] = None,
     owner: Annotated[str | None, Query(max_length=64)] = None,
     area: Annotated[str | None, Query(max_length=40)] = None,
@@ -114,13 +114,13 @@ def list_jobs(
 
 
 @router.get("/{job_id}", response_model=JobOut, responses=_ERRORS)
-def get_job(job_id: int, session: SessionDep) -> JobOut:
+def get_job(job_id: IdPath, session: SessionDep) -> JobOut:
     return job_out(_load(session, job_id))
 
 
 @router.post("/{job_id}/cancel", response_model=JobOut,
              responses={**_ERRORS, 409: {"model": ErrorBody}})
-def cancel(job_id: int, session: SessionDep, user: UserDep) -> JobOut:
+def cancel(job_id: IdPath, session: SessionDep, user: UserDep) -> JobOut:
     job = _load(session, job_id)
     if not may_manage(user, job):
         raise HTTPException(403, "only the job's owner or an admin may cancel it")
@@ -131,7 +131,8 @@ def cancel(job_id: int, session: SessionDep, user: UserDep) -> JobOut:
 
 @router.post("/{job_id}/rerun", status_code=201, response_model=JobOut,
              responses={**_ERRORS, 429: {"model": ErrorBody}})
-def rerun(job_id: int, session: SessionDep, settings: SettingsDep, user: UserDep) -> JobOut:
+def rerun(job_id: IdPath, session: SessionDep, settings: SettingsDep,
+          user: UserDep) -> JobOut:
     job = _load(session, job_id)
     if not may_manage(user, job):
         raise HTTPException(403, "only the job's owner or an admin may re-run it")

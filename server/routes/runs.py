@@ -11,7 +11,7 @@ from fastapi.responses import FileResponse, PlainTextResponse
 from sqlalchemy import select
 from sqlalchemy.orm import selectinload
 
-from server.deps import SessionDep, SettingsDep, UserDep
+from server.deps import IdPath, SessionDep, SettingsDep, UserDep
 from server.jobs import may_manage
 from server.models import Artifact, Job, MetricSeries, Run, RunState
 from server.schemas import ArtifactOut, ErrorBody, ResultOut, RunOut, SeriesOut
@@ -44,7 +44,7 @@ def _series(blob: bytes) -> list[float]:
 
 
 @router.get("/{run_id}", response_model=RunOut, responses=_ERRORS)
-def get_run(run_id: int, session: SessionDep) -> RunOut:
+def get_run(run_id: IdPath, session: SessionDep) -> RunOut:
     run = _load(session, run_id)
     result = run.result
     return RunOut(
@@ -63,7 +63,7 @@ def get_run(run_id: int, session: SessionDep) -> RunOut:
 
 
 @router.get("/{run_id}/series", response_model=SeriesOut, responses=_ERRORS)
-def get_series(run_id: int, session: SessionDep) -> SeriesOut:
+def get_series(run_id: IdPath, session: SessionDep) -> SeriesOut:
     if session.get(Run, run_id) is None:
         raise HTTPException(404, f"no run with id {run_id}")
     series = session.get(MetricSeries, run_id)
@@ -77,7 +77,7 @@ def get_series(run_id: int, session: SessionDep) -> SeriesOut:
 
 @router.get("/{run_id}/artifacts/{kind}", response_class=FileResponse,
             responses={**_ERRORS, 200: {"content": {"application/octet-stream": {}}}})
-def get_artifact(run_id: int, kind: str, session: SessionDep,
+def get_artifact(run_id: IdPath, kind: str, session: SessionDep,
                  settings: SettingsDep) -> FileResponse:
     if kind not in ARTIFACT_FILES or kind in PRIVATE_KINDS:
         raise HTTPException(404, f"unknown artifact kind {kind!r}; known: "
@@ -100,7 +100,7 @@ def get_artifact(run_id: int, kind: str, session: SessionDep,
 
 @router.get("/{run_id}/log", response_class=PlainTextResponse,
             responses={**_ERRORS, 403: {"model": ErrorBody}})
-def get_log(run_id: int, session: SessionDep, settings: SettingsDep, user: UserDep,
+def get_log(run_id: IdPath, session: SessionDep, settings: SettingsDep, user: UserDep,
             tail: Annotated[int, Query(ge=1, le=100_000)] = 200) -> PlainTextResponse:
     run = _load(session, run_id)
     if not may_manage(user, run.job):

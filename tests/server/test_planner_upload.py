@@ -71,7 +71,9 @@ def _planner_rows(sessions: sessionmaker[Session]) -> int:
     ("code.zip", _zip({f"m{i}.py": b"x = 1" for i in range(201)} | {"planner.py": GOOD}), 422,
      "too many files"),
     ("planner.py", RAISES, 422, "no idea"),
-    ("planner.py", b"x = 1\n", 422, "exactly one Planner subclass"),
+    ("planner.py", b"x = 1\n", 422, "defines no class deriving from"),
+    ("planner.py", b"from planners.api import Planner\nclass A(Planner): pass\n"
+     b"class B(Planner): pass\n", 422, "exactly one Planner subclass"),
 ])
 def test_refused_uploads_store_nothing(
     client: TestClient, tokens: Any, sessions: sessionmaker[Session], filename: str,

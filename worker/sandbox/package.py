@@ -70,6 +70,21 @@ def _check_source(name: str, data: bytes) -> None:
         raise PackageError(f"{name} is not valid Python source: {exc}") from None
 
 
+def _check_defines_a_planner(source: bytes) -> None:
+    """planner.py must define a class with a base named like `Planner` (checked statically, so
+    that files that cannot be planners never reach the sandbox)."""
+    import ast
+
+    tree = ast.parse(source.decode("utf-8"))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ClassDef):
+            for base in node.bases:
+                name = base.attr if isinstance(base, ast.Attribute) else getattr(base, "id", "")
+                if "Planner" in name:
+                    return
+    raise PackageError("planner.py defines no class deriving from planners.api.Planner")
+
+
 def load_package(filename: str, data: bytes, limits: PackageLimits | None = None) -> PlannerPackage:
     """Check an upload and normalise it."""
     limits = limits or PackageLimits()
@@ -89,6 +104,7 @@ def load_package(filename: str, data: bytes, limits: PackageLimits | None = None
         raise PackageError("the archive has no planner.py at its root")
     for name, content in files.items():
         _check_source(name, content)
+    _check_defines_a_planner(files["planner.py"])
     buffer = io.BytesIO()
     with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as out:
         for name in sorted(files):
