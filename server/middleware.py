@@ -9,10 +9,12 @@ pages and progress polling stay cheap.
 from __future__ import annotations
 
 import hashlib
+import json
 import threading
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
+from typing import Any
 
 from fastapi import FastAPI, Request, Response
 from fastapi.middleware.cors import CORSMiddleware
@@ -92,6 +94,13 @@ def install_middleware(app: FastAPI, settings: Settings) -> None:
             response.headers.setdefault(name, value)
         return response
 
+    slack = 256 * 1024  # multipart framing and form fields around the file
+    app.add_middleware(
+        BodyLimit,
+        limits=[("/api/v1/areas", settings.max_area_upload_bytes + slack),
+                ("/api/v1/planners",
+                 int(settings.max_planner_upload_mib * 1024 * 1024) + slack)],
+        default=1024 * 1024)
     if settings.cors_origins:
         app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins,
                            allow_methods=["GET", "POST"],
@@ -103,3 +112,67 @@ def _too_many(wait: float, what: str) -> JSONResponse:
     seconds = max(1, int(wait + 0.999))
     return JSONResponse({"detail": f"rate limit: {what}; retry in {seconds} s"}, 429,
                         headers={"Retry-After": str(seconds), **SECURITY_HEADERS})
+
+
+class BodyLimit:
+    """Refuse request bodies over a size limit before they are parsed or spooled to disk.
+
+    The declared Content-Length is checked first; a body without one (chunked) is counted as it
+    arrives and cut off at the limit. Limits are per path prefix, the last entry the default.
+    """
+
+    def __init__(self, app: Any, limits: list[tuple[str, int]], default: int) -> None:
+        self.app, self.limits, self.default = app, limits, default
+
+    def _limit(self, path: str) -> int:
+        for prefix, limit in self.limits:
+            if path.startswith(prefix):
+                return limit
+        return self.default
+
+    async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
+        if scope["type"] != "http" or scope["method"] not in MUTATING:
+            await self.app(scope, receive, send)
+            return
+        limit = self._limit(scope["path"])
+        headers = dict(scope.get("headers") or [])
+        declared = headers.get(b"content-length")
+        if declared is not None and (not declared.isdigit() or int(declared) > limit):
+            await _send_413(send, limit)
+            return
+        seen = 0
+        exceeded = False
+        replaced = False
+
+        async def counted_receive() -> Any:
+            nonlocal seen, exceeded
+            if exceeded:
+                return {"type": "http.request", "body": b"", "more_body": False}
+            message = await receive()
+            if message["type"] == "http.request":
+                seen += len(message.get("body", b""))
+                if seen > limit:
+                    # Cut the body off here; whatever the app answers is replaced by a 413.
+                    exceeded = True
+                    return {"type": "http.request", "body": b"", "more_body": False}
+            return message
+
+        async def guarded_send(message: Any) -> None:
+            nonlocal replaced
+            if not exceeded:
+                await send(message)
+            elif not replaced and message["type"] == "http.response.start":
+                replaced = True
+                await _send_413(send, limit)
+
+        await self.app(scope, counted_receive, guarded_send)
+
+
+async def _send_413(send: Any, limit: int) -> None:
+    body = json.dumps({"detail": f"request body too large: at most {limit} bytes"}).encode()
+    await send({"type": "http.response.start", "status": 413,
+                "headers": [(b"content-type", b"application/json"),
+                            (b"content-length", str(len(body)).encode()),
+                            *((k.lower().encode(), v.encode())
+                              for k, v in SECURITY_HEADERS.items())]})
+    await send({"type": "http.response.body", "body": body})

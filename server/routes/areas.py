@@ -12,6 +12,7 @@ from sqlalchemy.exc import IntegrityError
 
 from server.catalog import CatalogError, ensure_area, upsert_area
 from server.deps import SessionDep, SettingsDep, UserDep
+from server.mesh_guard import MeshGuardError, prescan
 from server.models import AreaRow
 from server.schemas import AreaOut
 from server.storage import ArtifactStoreError, open_store
@@ -83,9 +84,13 @@ def upload_area(
                     raise HTTPException(413, f"upload too large: at most "
                                              f"{settings.max_area_upload_mib:g} MiB")
                 out.write(block)
+        limits = ImportLimits(max_file_bytes=limit)
         try:
-            area = import_mesh(path, name, scale=scale, up=up,
-                               limits=ImportLimits(max_file_bytes=limit))
+            prescan(path, limits.max_faces)
+        except MeshGuardError as exc:
+            raise HTTPException(422, f"mesh rejected: {exc}") from None
+        try:
+            area = import_mesh(path, name, scale=scale, up=up, limits=limits)
         except MeshImportError as exc:
             raise HTTPException(422, f"mesh rejected: {exc}") from None
         try:

@@ -54,7 +54,7 @@ def test_no_server_errors(fuzz_app: tuple[Any, str]) -> None:
         @given(case=operation.as_strategy())
         @settings(max_examples=EXAMPLES_PER_OPERATION, deadline=None, database=None,
                   suppress_health_check=list(HealthCheck))
-        def call(case: Any) -> None:
+        def call(case: Any, label: str = label) -> None:
             headers = {"Authorization": f"Bearer {token}"} if len(sent) % 2 == 0 else {}
             response = case.call(headers=headers)
             sent.append((label, response.status_code))
