@@ -153,7 +153,7 @@ def _worker(args: argparse.Namespace) -> None:
 def _serve(args: argparse.Namespace) -> None:
     import uvicorn
 
-    from server.app import create_app
+    from server.app import MAX_CONCURRENT_REQUESTS, create_app
 
     if not 0 < args.port < 65536:
         raise _error(f"--port must be 1-65535, got {args.port}")
@@ -167,7 +167,8 @@ def _serve(args: argparse.Namespace) -> None:
             _demo(factory, settings, url)
         print(f"FLYBO is serving at {url}/  (API docs: {url}/docs; {len(workers)} worker(s); "
               f"data in {settings.resolved_data_dir})", flush=True)
-        uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level="info")
+        uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level="info",
+                    limit_concurrency=MAX_CONCURRENT_REQUESTS)
     finally:
         for proc in workers:
             proc.send_signal(signal.SIGTERM)

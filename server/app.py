@@ -9,16 +9,18 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import threading
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
+import anyio.to_thread
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from server.catalog import sync_builtin_areas, sync_builtin_planners
-from server.db import make_engine, make_session_factory, session_scope
+from server.db import make_engine, make_session_factory, read_only, session_scope
 from server.middleware import install_middleware
 from server.migrate import upgrade
 from server.routes import areas, curves, health, jobs, leaderboard, planners, runs
@@ -27,6 +29,8 @@ from server.sweeper import sweep
 
 log = logging.getLogger(__name__)
 API_PREFIX = "/api/v1"
+THREADS = 400
+MAX_CONCURRENT_REQUESTS = 300  # `flybo serve` passes it to uvicorn; beyond it, 503
 
 
 def create_app(settings: Settings | None = None, *, sweeper: bool = True,
@@ -35,31 +39,37 @@ def create_app(settings: Settings | None = None, *, sweeper: bool = True,
     settings = settings or load_settings()
     engine = make_engine(settings.db_url)
     sessions = make_session_factory(engine)
+    read_sessions = make_session_factory(read_only(engine))
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        # A request holds its pooled connection until its response is validated, which for a
+        # sync endpoint needs a worker thread again. With as many threads as connections, all
+        # threads can end up waiting for a connection while every connection waits for a
+        # thread. More threads than concurrent requests (uvicorn's limit, see `flybo serve`)
+        # rule that out.
+        anyio.to_thread.current_default_thread_limiter().total_tokens = THREADS
         await asyncio.to_thread(upgrade, engine)
         with session_scope(sessions) as session:
             await asyncio.to_thread(sync_builtin_planners, session)
-        # Areas are built in the background: the API answers meanwhile, and a job naming an
-        # area not synced yet builds its row on demand.
-        area_sync = asyncio.create_task(asyncio.to_thread(_sync_areas)) if sync_areas else None
+        # Areas are built in a background thread: the API answers meanwhile, a job naming an
+        # area not synced yet builds its row on demand, and shutdown does not wait for it.
+        if sync_areas:
+            threading.Thread(target=_sync_areas, name="area-sync", daemon=True).start()
         sweeping = asyncio.create_task(_sweep_forever()) if sweeper else None
         try:
             yield
         finally:
-            for task in (sweeping, area_sync):
-                if task is not None:
-                    task.cancel()
-                    with contextlib.suppress(asyncio.CancelledError, Exception):
-                        await task
+            if sweeping is not None:
+                sweeping.cancel()
+                with contextlib.suppress(asyncio.CancelledError, Exception):
+                    await sweeping
             engine.dispose()
 
     def _sync_areas() -> None:
         try:
-            with session_scope(sessions) as session:
-                sync_builtin_areas(session)
-        except Exception:  # a concurrent insert by another process: it is synced either way
+            sync_builtin_areas(sessions)
+        except Exception:
             log.exception("syncing the built-in areas failed")
 
     async def _sweep_forever() -> None:
@@ -75,6 +85,7 @@ def create_app(settings: Settings | None = None, *, sweeper: bool = True,
     app.state.settings = settings
     app.state.engine = engine
     app.state.sessions = sessions
+    app.state.read_sessions = read_sessions
     app.include_router(health.router)
     for router in (areas.router, planners.router, jobs.router, runs.router,
                    leaderboard.router, curves.router):

@@ -10,7 +10,7 @@ from typing import Any
 
 from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, sessionmaker
 
 from server.models import AreaRow, PlannerRow
 
@@ -68,11 +68,16 @@ def ensure_area(session: Session, name: str) -> AreaRow:
     return upsert_area(session, area, builtin=name in area_names())
 
 
-def sync_builtin_areas(session: Session) -> None:
+def sync_builtin_areas(factory: sessionmaker[Session]) -> None:
+    """Rows for every built-in area. Each area is built first, then written in its own short
+    transaction: building takes seconds, and SQLite allows one writer at a time."""
     from areas.registry import area_names, load_area
 
     for name in area_names():
-        upsert_area(session, load_area(name), builtin=True)
+        area = load_area(name)
+        with factory() as session:
+            upsert_area(session, area, builtin=True)
+            session.commit()
 
 
 def sync_builtin_planners(session: Session) -> None:

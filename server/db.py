@@ -14,7 +14,8 @@ from sqlalchemy.orm import Session, sessionmaker
 def make_engine(url: str) -> Engine:
     """An engine for `url`; SQLite gets WAL, a busy timeout and enforced foreign keys, because
     the API and worker processes write to the same file."""
-    kwargs: dict[str, Any] = {"pool_pre_ping": True}
+    # Many request threads may wait on the database at once (the API's thread pool has 40).
+    kwargs: dict[str, Any] = {"pool_pre_ping": True, "pool_size": 20, "max_overflow": 20}
     if url.startswith("sqlite"):
         path = url.split("///", 1)[-1]
         if path and path != ":memory:":
@@ -29,15 +30,30 @@ def make_engine(url: str) -> Engine:
 
 def _sqlite_begin(conn: Any) -> None:
     # The driver's own transaction handling breaks SAVEPOINTs, and a deferred transaction that
-    # later writes can fail at once when another process wrote meanwhile: take the write lock
-    # up front (waiting up to the busy timeout) instead.
-    conn.exec_driver_sql("BEGIN IMMEDIATE")
+    # later writes can fail at once when another process wrote meanwhile: writers take the
+    # write lock up front (waiting up to the busy timeout). Readers (`read_only`) do not: in WAL
+    # mode they never block anyone.
+    if conn.get_execution_options().get(READ_ONLY):
+        conn.exec_driver_sql("BEGIN")
+    else:
+        conn.exec_driver_sql("BEGIN IMMEDIATE")
+
+
+READ_ONLY = "flybo_read_only"
+
+
+def read_only(engine: Engine) -> Engine:
+    """The same engine and pool, for sessions that only read."""
+    return engine.execution_options(**{READ_ONLY: True})
 
 
 def _sqlite_pragmas(dbapi_conn: Any, _record: Any) -> None:
     dbapi_conn.isolation_level = None  # SQLAlchemy emits BEGIN itself (see _sqlite_begin)
     cursor = dbapi_conn.cursor()
-    cursor.execute("PRAGMA journal_mode=WAL")
+    # Switching the journal mode takes a lock: do it only once per database file, not on every
+    # new pooled connection while others are busy.
+    if cursor.execute("PRAGMA journal_mode").fetchone()[0].lower() != "wal":
+        cursor.execute("PRAGMA journal_mode=WAL")
     cursor.execute("PRAGMA busy_timeout=30000")
     cursor.execute("PRAGMA foreign_keys=ON")
     cursor.close()

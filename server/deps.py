@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import AsyncIterator
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Path, Request
@@ -21,8 +21,14 @@ def get_settings(request: Request) -> Settings:
     return settings
 
 
-def get_session(request: Request) -> Iterator[Session]:
-    factory: sessionmaker[Session] = request.app.state.sessions
+async def get_session(request: Request) -> AsyncIterator[Session]:
+    # An async dependency on purpose: a sync one would need a worker thread to close the
+    # session after the response, and with every thread busy waiting for a pooled connection
+    # that close could never run (a deadlock under load). Closing only returns a connection.
+    # Reads get sessions that never take SQLite's write lock (see server.db).
+    reads = request.method in ("GET", "HEAD")
+    factory: sessionmaker[Session] = (request.app.state.read_sessions if reads
+                                      else request.app.state.sessions)
     session = factory()
     try:
         yield session
