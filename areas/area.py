@@ -53,6 +53,8 @@ class Area:
         plateau_s: exploration plateau time in simulated seconds.
         voxel_size: occupancy voxel edge in metres for this area.
         info: Table 1 statistics.
+        cache_key: for generated areas, ``name-g<generator version>-s<seed>``: names the
+            ground-truth cache file; None for imported areas (the content hash names it).
     """
 
     name: str
@@ -64,6 +66,7 @@ class Area:
     plateau_s: float
     voxel_size: float
     info: AreaInfo
+    cache_key: str | None = None
     _hash: str | None = field(default=None, repr=False)
 
     @property

@@ -3,7 +3,8 @@
 Works for any triangle mesh, closed or not, with any winding:
 
 1. Surface samples: the mesh surface sampled uniformly, about one point per ``sample_spacing**2``
-   of area, seeded from the area's content hash so the result is reproducible.
+   of area (2 cm spacing by default), seeded from the area's content hash so the result is
+   reproducible; triangles are sampled in chunks to bound memory on the large areas.
 2. Blocked voxels: voxels whose centre lies within ``voxel_size / 2`` of the mesh. Any path of
    6-adjacent voxel centres that crosses the surface crosses it on a segment of length
    ``voxel_size`` between two centres, so one of those centres is within ``voxel_size / 2`` of the
@@ -28,10 +29,14 @@ stays in the perceivable cloud.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
 import tempfile
 import zipfile
+from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -45,9 +50,15 @@ FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
 
-DEFAULT_SAMPLE_SPACING = 0.025
+DEFAULT_SAMPLE_SPACING = 0.02
 # Stored in each cache file; bump when the computation changes so stale files are recomputed.
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+# Triangles are sampled in chunks of about this many points, so that the large areas (tens of
+# millions of samples at 2 cm) never hold all float64 samples and their normals at once.
+SAMPLE_CHUNK_POINTS = 1 << 21
+# Largest step of the stored point coordinates: clouds up to 65 m a side are stored as uint16
+# steps (a rounding error of at most 0.5 mm, against a 2 cm sample spacing and 5 cm metrics).
+QUANTUM = 1e-3
 # Margin on the blocking radius, as a fraction of the voxel size: distances come back in float32,
 # and a wall lying exactly on voxel faces must block the voxels touching it on both sides.
 BLOCK_RADIUS_MARGIN = 1e-3
@@ -185,14 +196,6 @@ def compute_ground_truth(
     """
     vertices = np.asarray(area.vertices, dtype=np.float64)
     triangles = np.asarray(area.triangles, dtype=np.int64)
-    rng = np.random.default_rng(int(area.content_hash[:16], 16))
-    points, normals = sample_surface(vertices, triangles, sample_spacing, rng)
-    eps = 1e-9 * max(1.0, float(np.max(np.abs(area.extent))))
-    in_bounds = np.all(
-        (points >= area.bounds_min - eps) & (points <= area.bounds_max + eps), axis=1
-    )
-    points, normals = points[in_bounds], normals[in_bounds]
-
     blocked = blocked_voxels(area)
     start_flat, start_inside = _voxel_index(area, area.start.position[None, :])
     start = np.unravel_index(int(start_flat[0]), area.grid_shape)
@@ -202,48 +205,97 @@ def compute_ground_truth(
     six = ndimage.generate_binary_structure(3, 1)
     labels, _ = ndimage.label(~blocked, structure=six)
     reachable = labels == labels[start]
+    del labels
 
-    step = SIDE_STEP * area.voxel_size * normals
-    side_a, inside_a = _voxel_index(area, points + step)
-    side_b, inside_b = _voxel_index(area, points - step)
+    # Two passes over the same seeded samples: the first marks the voxels holding surface, the
+    # second keeps the samples of the surface layer. Regenerating is cheaper than holding them.
+    seed = int(area.content_hash[:16], 16)
     has_surface = np.zeros(blocked.size, dtype=bool)
-    has_surface[side_a[inside_a]] = True
-    has_surface[side_b[inside_b]] = True
+    for _, side_a, inside_a, side_b, inside_b in _sample_chunks(
+        area, vertices, triangles, sample_spacing, seed
+    ):
+        has_surface[side_a[inside_a]] = True
+        has_surface[side_b[inside_b]] = True
 
     # Edge and corner neighbours count too: the voxels along a concave edge or corner of the free
     # space touch no reachable voxel by a face, yet a camera sees their surface.
     twenty_six = ndimage.generate_binary_structure(3, 3)
     near_reachable = ndimage.binary_dilation(reachable, structure=twenty_six).ravel()
     layer = (has_surface | blocked.ravel()) & near_reachable
-    perceivable = (inside_a & layer[side_a]) | (inside_b & layer[side_b])
+    del has_surface, near_reachable
+    kept: list[npt.NDArray[np.float32]] = []
+    for points, side_a, inside_a, side_b, inside_b in _sample_chunks(
+        area, vertices, triangles, sample_spacing, seed
+    ):
+        perceivable = (inside_a & layer[side_a]) | (inside_b & layer[side_b])
+        kept.append(points[perceivable])
     observable = reachable | layer.reshape(area.grid_shape)
     return GroundTruth(
         observable=observable,
-        surface_points=points[perceivable].astype(np.float32),
+        surface_points=np.concatenate(kept) if kept else np.zeros((0, 3), dtype=np.float32),
         voxel_size=area.voxel_size,
     )
 
 
+def _sample_chunks(
+    area: Area, vertices: FloatArray, triangles: IntArray, spacing: float, seed: int
+) -> Iterator[tuple[npt.NDArray[np.float32], IntArray, BoolArray, IntArray, BoolArray]]:
+    """Surface samples inside the bounds, chunk by chunk of triangles, identical on every call.
+
+    Yields:
+        points: (n, 3) float32 samples.
+        side_a, side_b: (n,) flat voxel indices a tiny step either side of the surface.
+        inside_a, inside_b: (n,) bool, whether those voxels lie in the grid.
+    """
+    corners = vertices[triangles]
+    area_per_tri = 0.5 * np.linalg.norm(
+        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
+    )
+    del corners
+    expected = np.cumsum(area_per_tri) / spacing**2
+    # Chunk boundaries every SAMPLE_CHUNK_POINTS expected samples (and at least one triangle).
+    cuts = np.searchsorted(expected, np.arange(SAMPLE_CHUNK_POINTS, expected[-1] if len(expected)
+                                               else 0.0, SAMPLE_CHUNK_POINTS))
+    edges = np.unique(np.concatenate([[0], cuts, [len(triangles)]]))
+    eps = 1e-9 * max(1.0, float(np.max(np.abs(area.extent))))
+    for index, (lo, hi) in enumerate(itertools.pairwise(edges)):
+        rng = np.random.default_rng([seed, index])
+        points, normals = sample_surface(vertices, triangles[lo:hi], spacing, rng)
+        keep = np.all((points >= area.bounds_min - eps) & (points <= area.bounds_max + eps), axis=1)
+        points, normals = points[keep], normals[keep]
+        step = SIDE_STEP * area.voxel_size * normals
+        side_a, inside_a = _voxel_index(area, points + step)
+        side_b, inside_b = _voxel_index(area, points - step)
+        yield points.astype(np.float32), side_a, inside_a, side_b, inside_b
+
+
 def ground_truth_path(area: Area) -> Path:
-    """Disk cache file of an area's ground truth."""
-    return cache_dir() / "ground_truth" / f"{area.content_hash}.npz"
+    """Disk cache file of an area's ground truth: named by the generator version and seed for
+    built-in areas (``area.cache_key``), by the content hash otherwise.
+
+    The file also records the content hash, checked on reading, so a generator changed without
+    bumping its version recomputes its ground truth instead of reading a stale one.
+    """
+    stem = area.cache_key or area.content_hash
+    return cache_dir() / "ground_truth" / f"{stem}.npz"
 
 
-def _write_atomic(path: Path, truth: GroundTruth) -> None:
+def _write_atomic(path: Path, truth: GroundTruth, content_hash: str) -> None:
     """Write ``truth`` to ``path`` through a temporary file so readers never see a partial file."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.stem, suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as f:
-            np.savez(
-                f,
-                version=np.int64(FORMAT_VERSION),
-                sample_spacing=np.float64(DEFAULT_SAMPLE_SPACING),
-                shape=np.array(truth.observable.shape, dtype=np.int64),
-                observable=np.packbits(truth.observable.ravel()),
-                surface_points=truth.surface_points,
-                voxel_size=np.float64(truth.voxel_size),
-            )
+            arrays: dict[str, Any] = {
+                "version": np.int64(FORMAT_VERSION),
+                "content_hash": np.array(content_hash),
+                "sample_spacing": np.float64(DEFAULT_SAMPLE_SPACING),
+                "shape": np.array(truth.observable.shape, dtype=np.int64),
+                "observable": np.packbits(truth.observable.ravel()),
+                "voxel_size": np.float64(truth.voxel_size),
+                **_pack_points(truth.surface_points),
+            }
+            np.savez(f, **arrays)
         # mkstemp creates the file private to its owner; the cache is readable like any other file.
         os.chmod(tmp, 0o644)
         os.replace(tmp, path)
@@ -253,12 +305,35 @@ def _write_atomic(path: Path, truth: GroundTruth) -> None:
         raise
 
 
+def _pack_points(points: npt.NDArray[np.float32]) -> dict[str, npt.NDArray[np.generic]]:
+    """Arrays storing (N, 3) points: uint16 steps of at most QUANTUM from their minimum corner
+    (6 bytes a point, half of float32: the large areas hold tens of millions of samples), or
+    float32 when the cloud is too large for that step."""
+    if len(points) == 0:
+        return {"surface_points": points}
+    lo = points.min(axis=0).astype(np.float64)
+    step = np.maximum((points.max(axis=0) - lo) / 65535.0, 1e-9)
+    if np.any(step > QUANTUM):
+        return {"surface_points": points}
+    codes = np.rint((points - lo) / step).astype(np.uint16)
+    return {"surface_codes": codes, "surface_origin": lo, "surface_step": step}
+
+
+def _unpack_points(data: Any) -> npt.NDArray[np.float32]:
+    """(N, 3) float32 points from what `_pack_points` stored."""
+    if "surface_codes" in data:
+        codes = data["surface_codes"]
+        return (codes * data["surface_step"] + data["surface_origin"]).astype(np.float32)
+    return np.asarray(data["surface_points"], dtype=np.float32)
+
+
 def _read(path: Path, area: Area) -> GroundTruth | None:
     """The cached ground truth at ``path``, or None if missing, unreadable or stale."""
     try:
         with np.load(path) as data:
             if (
                 int(data["version"]) != FORMAT_VERSION
+                or str(data["content_hash"]) != area.content_hash
                 or float(data["sample_spacing"]) != DEFAULT_SAMPLE_SPACING
                 or tuple(int(n) for n in data["shape"]) != area.grid_shape
                 or float(data["voxel_size"]) != area.voxel_size
@@ -266,7 +341,7 @@ def _read(path: Path, area: Area) -> GroundTruth | None:
                 return None
             count = int(np.prod(area.grid_shape))
             bits = np.unpackbits(data["observable"], count=count).astype(bool)
-            points = np.asarray(data["surface_points"], dtype=np.float32)
+            points = _unpack_points(data)
     except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):
         return None
     return GroundTruth(
@@ -284,6 +359,24 @@ def load_ground_truth(area: Area) -> GroundTruth:
     truth = _read(path, area) if path.exists() else None
     if truth is None:
         truth = compute_ground_truth(area)
-        _write_atomic(path, truth)
+        # Keep the stored (rounded) coordinates in memory too: a worker that computed the
+        # ground truth and one that read it from the cache then score runs identically.
+        packed = _pack_points(truth.surface_points)
+        truth = replace(truth, surface_points=_unpack_points(packed))
+        _write_atomic(path, truth, key)
     _memory_cache[key] = truth
     return truth
+
+
+def ensure_cached(area: Area) -> tuple[GroundTruth, bool]:
+    """The ground truth of an area, making sure its disk cache file exists.
+
+    Returns:
+        The ground truth, and whether a valid cache file was there already.
+    """
+    path = ground_truth_path(area)
+    cached = path.exists() and _read(path, area) is not None
+    truth = load_ground_truth(area)
+    if not path.exists():  # held in memory from before the cache folder changed
+        _write_atomic(path, truth, area.content_hash)
+    return truth, cached

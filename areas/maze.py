@@ -19,6 +19,8 @@ import numpy.typing as npt
 
 from areas.area import Area, AreaInfo, StartPose
 
+# Bump when a change to this module changes the generated area (names its ground-truth cache).
+GENERATOR_VERSION = 1
 CELLS = 10
 CELL_SIZE = 2.0
 # 0.25 m puts every wall face mid-voxel on the 0.1 m grid: a face on a voxel boundary would make
@@ -179,4 +181,5 @@ def build_maze(seed: int = 0) -> Area:
         plateau_s=700.0,
         voxel_size=0.1,
         info=AreaInfo(title="MAZE", rooms=None, levels=1, complexity="low", indoor=True),
+        cache_key=f"maze-g{GENERATOR_VERSION}-s{seed}",
     )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import partial
 
 from areas.area import Area
 from areas.maze import build_maze
@@ -65,4 +66,37 @@ def load_area(name: str) -> Area:
     raise UnknownAreaError(name, all_area_names())
 
 
-register_area("maze", lambda: build_maze(seed=0))
+def _generators() -> dict[str, Callable[[int], Area]]:
+    """Generator of each built-in area by name, taking the layout seed."""
+    from areas import facility, offices, platform, powerplant, warehouse
+
+    gens: dict[str, Callable[[int], Area]] = {"maze": build_maze}
+    for cfg in (offices.OFFICES_A, offices.OFFICES_B, offices.OFFICES_C):
+        gens[cfg.name] = partial(offices.build_offices, cfg)
+    for fcfg in (facility.FACILITY_A, facility.FACILITY_B, facility.FACILITY_C):
+        gens[fcfg.name] = partial(facility.build_facility, fcfg)
+    gens["warehouse"] = warehouse.build_warehouse
+    for pcfg in (platform.PLATFORM_A, platform.PLATFORM_B):
+        gens[pcfg.name] = partial(platform.build_platform, pcfg)
+    gens["powerplant"] = powerplant.build_powerplant
+    return gens
+
+
+_GENERATORS = _generators()
+
+
+def generate_area(name: str, seed: int) -> Area:
+    """A built-in area generated with another layout seed (the registered ones use seed 0).
+
+    Raises:
+        UnknownAreaError: when ``name`` is not a built-in area.
+    """
+    gen = _GENERATORS.get(name.strip().lower())
+    if gen is None:
+        raise UnknownAreaError(name, sorted(_GENERATORS))
+    return gen(seed)
+
+
+for _name, _gen in _GENERATORS.items():
+    # The benchmark's fixed scenes: every built-in area at layout seed 0.
+    register_area(_name, partial(_gen, 0))

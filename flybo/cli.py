@@ -75,7 +75,18 @@ def _parser() -> argparse.ArgumentParser:
     imp.add_argument("--voxel-size", type=_positive, default=0.1,
                      help="occupancy voxel edge in metres (default 0.1)")
     imp.add_argument("--overwrite", action="store_true", help="replace an area of that name")
-    sub.add_parser("planners", help="list the registered planners")
+    show = areas_sub.add_parser("show", help="an area's Table 1 statistics, measured from its "
+                                "mesh and ground truth, beside the paper's values")
+    show.add_argument("name", help="area name")
+    build = areas_sub.add_parser("build", help="build the ground truth and thumbnails of an "
+                                 "area (or all built-in areas) into the cache")
+    build.add_argument("name", help="area name, or 'all' for every built-in area")
+    planners = sub.add_parser("planners", help="list the registered planners, or check a file")
+    planners_sub = planners.add_subparsers(dest="planners_command")
+    planners_sub.add_parser("list", help="the registered planners (the default)")
+    check = planners_sub.add_parser("check", help="run the upload checks and the sandboxed dry "
+                                    "run on a planner file (.py or .zip) locally")
+    check.add_argument("file", type=Path)
     sub.add_parser("presets", help="list the episode presets")
     from flybo.service_cli import add_service_commands
 
@@ -90,8 +101,16 @@ def main(argv: list[str] | None = None) -> None:
             _run(args)
         elif args.command == "areas" and args.areas_command == "import":
             _import_area(args)
+        elif args.command == "areas" and args.areas_command == "show":
+            _show_area(args.name)
+        elif args.command == "areas" and args.areas_command == "build":
+            _build_areas(args.name)
         elif args.command == "areas":
             _list_areas()
+        elif args.command == "planners" and args.planners_command == "check":
+            from flybo.service_cli import check_planner
+
+            check_planner(args.file)
         elif args.command == "planners":
             _list_planners()
         elif args.command == "presets":
@@ -137,6 +156,79 @@ def _import_area(args: argparse.Namespace) -> None:
     print(f"imported {area.name}: {len(area.triangles)} faces, {size} m, "
           f"observable volume {truth.observable_volume_m3:.1f} m³, "
           f"start {np.round(area.start.position, 2).tolist()}, plateau {area.plateau_s:g} s")
+
+
+def _load_named_area(name: str) -> Area:
+    from areas import UnknownAreaError, load_area
+    from areas.store import AreaStoreError
+
+    try:
+        return load_area(name)
+    except (UnknownAreaError, AreaStoreError) as exc:
+        raise CliError(str(exc).splitlines()[0]) from None
+
+
+def _show_area(name: str) -> None:
+    from areas import load_ground_truth
+    from areas.stats import TABLE1, measure
+
+    area = _load_named_area(name)
+    try:
+        stats = measure(area, load_ground_truth(area))
+    except ValueError as exc:
+        raise CliError(f"{area.name}: {str(exc).splitlines()[0]}") from None
+    paper = TABLE1.get(area.name)
+
+    def size(v: tuple[float, float, float]) -> str:
+        return " x ".join(f"{x:.3g}" for x in v)
+
+    levels = ", ".join(f"{h:.1f}" for h in stats.level_heights)
+    rooms = "-" if area.info.rooms is None else str(area.info.rooms)
+    rows = [
+        ("area (m²)", f"{stats.area_m2:.0f}", paper and f"{paper.area_m2:g}"),
+        ("volume (m³)", f"{stats.volume_m3:.0f}", paper and f"{paper.volume_m3:g}"),
+        ("bounding volume (m)", size(stats.bounding), paper and size(paper.bounding)),
+        ("rooms", rooms, paper and ("-" if paper.rooms is None else str(paper.rooms))),
+        ("levels", f"{stats.levels} (floors at {levels} m)", paper and str(paper.levels)),
+        ("faces", f"{stats.faces:,}", paper and f"{paper.faces:,}"),
+        ("indoor / outdoor", "indoor" if area.info.indoor else "outdoor", None),
+        ("voxel size (m)", f"{area.voxel_size:g}", None),
+        ("plateau (s)", f"{area.plateau_s:g}", None),
+        ("start", f"{np.round(area.start.position, 2).tolist()}, yaw {area.start.yaw:.2f}",
+         None),
+    ]
+    print(f"{area.info.title} ({area.name})")
+    print(f"  {'':<20} {'measured':<34} {'Table 1' if paper else ''}")
+    for label, measured, table in rows:
+        print(f"  {label:<20} {measured:<34} {table or ''}".rstrip())
+
+
+def _build_areas(name: str) -> None:
+    import time
+
+    from areas import area_names
+    from areas.ground_truth import ensure_cached
+    from areas.thumbnail import write_thumbnails
+
+    names = area_names() if name.strip().lower() == "all" else [name]
+    total = time.perf_counter()
+    for each in names:
+        began = time.perf_counter()
+        area = _load_named_area(each)
+        generated = time.perf_counter()
+        try:
+            truth, cached = ensure_cached(area)
+        except ValueError as exc:
+            raise CliError(f"{area.name}: {str(exc).splitlines()[0]}") from None
+        truthed = time.perf_counter()
+        top, _ = write_thumbnails(area)
+        done = time.perf_counter()
+        print(f"{area.name:<12} mesh {generated - began:5.1f} s  ground truth "
+              f"{truthed - generated:5.1f} s{' (cached)' if cached else ''}  thumbnails "
+              f"{done - truthed:4.1f} s  {len(area.triangles):>8,} faces  "
+              f"{len(truth.surface_points):>11,} surface points", flush=True)
+    print(f"built {len(names)} area(s) in {time.perf_counter() - total:.1f} s; "
+          f"thumbnails in {top.parent}")
 
 
 def _list_planners() -> None:

@@ -58,10 +58,18 @@ class TsdfVolume:
         image = o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(clean)))
         ext = o3c.Tensor(self.extrinsic(pose))
         mult = self.config.trunc_voxel_multiplier
-        blocks = self._grid.compute_unique_block_coordinates(
-            image, self._intrinsic, ext, 1.0, self._max_range, mult
-        )
-        self._grid.integrate(blocks, image, self._intrinsic, ext, 1.0, self._max_range, mult)
+        if not np.any((clean > 0.0) & (clean <= self._max_range)):
+            return  # nothing within range: Open3D would raise "no block is touched"
+        try:
+            blocks = self._grid.compute_unique_block_coordinates(
+                image, self._intrinsic, ext, 1.0, self._max_range, mult
+            )
+            self._grid.integrate(blocks, image, self._intrinsic, ext, 1.0, self._max_range,
+                                 mult)
+        except RuntimeError as exc:
+            if "block" not in str(exc).lower():
+                raise
+            return  # a frame whose returns touch no voxel block: nothing to fuse
         self.frames += 1
 
     def surface_points(self) -> npt.NDArray[np.float64]:

@@ -49,6 +49,28 @@ class Contact:
     depth: float
 
 
+# pybullet refuses mesh shapes above 131,072 vertices or 524,288 indices: large scenes are
+# split into parts below both, each its own static body.
+MAX_PART_TRIANGLES = 40_000
+
+
+def _scene_shapes(vertices: FloatArray, triangles: npt.NDArray[np.int32], cid: int) -> list[int]:
+    verts = np.asarray(vertices, dtype=np.float64)
+    tris = np.asarray(triangles, dtype=np.int32).reshape(-1, 3)
+    shapes = []
+    for start in range(0, max(len(tris), 1), MAX_PART_TRIANGLES):
+        part = tris[start:start + MAX_PART_TRIANGLES]
+        used, local = np.unique(part, return_inverse=True)
+        shapes.append(pybullet.createCollisionShape(
+            pybullet.GEOM_MESH,
+            vertices=verts[used].tolist(),
+            indices=local.astype(np.int32).reshape(-1).tolist(),
+            flags=pybullet.GEOM_FORCE_CONCAVE_TRIMESH,
+            physicsClientId=cid,
+        ))
+    return shapes
+
+
 class World:
     """One pybullet DIRECT client holding the scene and the vehicle."""
 
@@ -69,16 +91,11 @@ class World:
         pybullet.setPhysicsEngineParameter(
             fixedTimeStep=self.dt, numSubSteps=1, physicsClientId=cid
         )
-        scene_shape = pybullet.createCollisionShape(
-            pybullet.GEOM_MESH,
-            vertices=np.asarray(vertices, dtype=np.float64).tolist(),
-            indices=np.asarray(triangles, dtype=np.int32).reshape(-1).tolist(),
-            flags=pybullet.GEOM_FORCE_CONCAVE_TRIMESH,
-            physicsClientId=cid,
-        )
-        self._scene = pybullet.createMultiBody(
-            baseMass=0.0, baseCollisionShapeIndex=scene_shape, physicsClientId=cid
-        )
+        self._scene = [
+            pybullet.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=shape,
+                                     physicsClientId=cid)
+            for shape in _scene_shapes(vertices, triangles, cid)
+        ]
         sphere = pybullet.createCollisionShape(
             pybullet.GEOM_SPHERE, radius=limits.radius_m, physicsClientId=cid
         )
@@ -114,7 +131,8 @@ class World:
         vel, _ = pybullet.getBaseVelocity(self._body, physicsClientId=cid)
         self.position = np.array(pos)
         self.velocity = np.array(vel)
-        contacts = pybullet.getContactPoints(self._body, self._scene, physicsClientId=cid)
+        contacts = [c for part in self._scene
+                    for c in pybullet.getContactPoints(self._body, part, physicsClientId=cid)]
         touching = [c for c in contacts if c[8] <= 0.0]
         if not touching:
             return None

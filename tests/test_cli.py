@@ -291,3 +291,58 @@ def test_areas_import_errors_name_the_problem(tmp_path: Path,
     assert "flybo: error:" in capsys.readouterr().err
     assert _exit_code(["areas", "import", str(text), "--name", "x", "--scale", "0"]) == 2
     assert "--scale" in capsys.readouterr().err
+
+
+# -- areas show / build --------------------------------------------------------------------------
+
+
+def test_areas_lists_all_eleven_built_in_areas(capsys: pytest.CaptureFixture[str]) -> None:
+    from areas.stats import TABLE1
+
+    main(["areas", "list"])
+    lines = capsys.readouterr().out.strip().splitlines()
+    built_in = [line.split()[0] for line in lines if line.split()[1] == "built-in"]
+    assert built_in == sorted(TABLE1)
+
+
+def test_areas_show_prints_measured_beside_table(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setenv("FLYBO_CACHE_DIR", str(tmp_path / "cache"))
+    main(["areas", "show", "MAZE"])
+    out = capsys.readouterr().out
+    assert out.startswith("MAZE (maze)")
+    rows = {line[:22].strip(): line[22:].split() for line in out.splitlines()[2:]}
+    assert rows["bounding volume (m)"] == ["19.8", "x", "19.8", "x", "2.5", "20", "x", "20", "x",
+                                           "2.5"]
+    assert rows["levels"][0] == "1"
+    assert rows["levels"][-1] == "1"
+    assert rows["faces"] == [f"{1628:,}", "130"]
+    assert float(rows["volume (m³)"][0]) > 800
+    assert rows["volume (m³)"][1] == "1000"
+
+
+def test_areas_show_and_build_reject_unknown_names(capsys: pytest.CaptureFixture[str]) -> None:
+    for command in ("show", "build"):
+        assert _exit_code(["areas", command, "atlantis"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("flybo: error: unknown area 'atlantis'")
+        assert len(err.strip().splitlines()) == 1
+    assert _exit_code(["areas", "show"]) == 2  # the name is required
+
+
+def test_areas_build_fills_the_cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    cache = tmp_path / "cache"
+    monkeypatch.setenv("FLYBO_CACHE_DIR", str(cache))
+    main(["areas", "build", "maze"])
+    out = capsys.readouterr().out
+    assert out.startswith("maze ")
+    assert "ground truth" in out
+    assert "(cached)" not in out
+    assert "built 1 area(s)" in out
+    assert (cache / "ground_truth" / "maze-g1-s0.npz").is_file()
+    for view in ("top", "perspective"):
+        png = cache / "thumbnails" / f"maze-g1-s0-{view}.png"
+        assert png.read_bytes().startswith(b"\x89PNG")
+    main(["areas", "build", "maze"])
+    assert "(cached)" in capsys.readouterr().out

@@ -35,7 +35,8 @@ def test_register_area(monkeypatch: pytest.MonkeyPatch) -> None:
         return build_maze(seed=7)
 
     registry.register_area("Maze7", build)
-    assert registry.area_names() == ["maze", "maze7"]
+    assert "maze7" in registry.area_names()
+    assert len(registry.area_names()) == 12
     first = areas.load_area("maze7")
     assert areas.load_area("MAZE7") is first
     assert len(calls) == 1

@@ -13,7 +13,12 @@ import trimesh
 
 from areas import ground_truth
 from areas.area import Area, AreaInfo, StartPose
-from areas.ground_truth import compute_ground_truth, ground_truth_path, load_ground_truth
+from areas.ground_truth import (
+    DEFAULT_SAMPLE_SPACING,
+    compute_ground_truth,
+    ground_truth_path,
+    load_ground_truth,
+)
 from areas.maze import CELL_SIZE, CELLS, HEIGHT, WALL_THICKNESS, build_maze, maze_passages
 
 VOXEL = 0.1
@@ -162,11 +167,14 @@ def test_maze_observable_volume_and_speed() -> None:
     assert free_volume == pytest.approx(882.65625)
     mesh = trimesh.Trimesh(maze.vertices, maze.triangles, process=False)
     wall_area = mesh.area - 2.0 * floor
-    layer = wall_area * 0.025
+    layer = wall_area * 0.025  # a wall face at .125 m: 0.025 m of its 0.1 m voxel is behind it
     assert truth.observable_volume_m3 == pytest.approx(free_volume + layer, rel=0.005)
     # Every sample of the closed maze faces the free space, so every sample is perceivable.
-    assert len(truth.surface_points) == pytest.approx(mesh.area / 0.025**2, rel=0.01)
-    assert elapsed < 10.0
+    assert len(truth.surface_points) == pytest.approx(mesh.area / DEFAULT_SAMPLE_SPACING**2,
+                                                      rel=0.01)
+    # About 4 s alone on a core (two passes of 2 cm samples); the bound leaves room for a busy
+    # shared machine.
+    assert elapsed < 20.0
 
 
 def test_disk_cache_round_trip(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

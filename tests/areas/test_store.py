@@ -10,7 +10,7 @@ import pytest
 
 from areas import UnknownAreaError, load_area
 from areas.maze import build_maze
-from areas.registry import all_area_names, store_area
+from areas.registry import all_area_names, area_names, store_area
 from areas.store import AreaStoreError, areas_dir, load_stored_area, save_area
 
 
@@ -33,12 +33,12 @@ def test_round_trip_and_lookup_by_name(data_dir: Path) -> None:
     assert (back.plateau_s, back.voxel_size, back.info) == (area.plateau_s, area.voxel_size,
                                                             area.info)
     assert back.content_hash == area.content_hash
-    assert all_area_names() == ["maze", "my-maze"]
+    assert all_area_names() == sorted([*area_names(), "my-maze"])
 
 
 def test_unknown_names_list_stored_areas() -> None:
     store_area(replace(build_maze(seed=1), name="hall"))
-    with pytest.raises(UnknownAreaError, match="known areas: hall, maze"):
+    with pytest.raises(UnknownAreaError, match=r"known areas: .*\bhall, maze\b"):
         load_area("nowhere")
 
 
