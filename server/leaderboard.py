@@ -8,11 +8,12 @@ planner on that area (`docs/metrics.md`).
 
 from __future__ import annotations
 
+import threading
 from collections import defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from server.models import AreaRow, Job, PlannerRow, Run, RunResult, RunState
@@ -49,7 +50,35 @@ def ranks(scores: dict[str, float]) -> dict[str, float]:
     return out
 
 
+_cache: dict[tuple[str, str | None], tuple[tuple[int, int, int], Leaderboard]] = {}
+_cache_lock = threading.Lock()
+
+
 def build_leaderboard(session: Session, preset: str, area: str | None = None) -> Leaderboard:
+    """The leaderboard, recomputed only when the stored results changed.
+
+    The check is one indexed aggregate (count and highest id of finished runs, number of
+    planners), so polling clients cost little; every API process keeps its own copy.
+    """
+    version_row = session.execute(
+        select(func.count(Run.id), func.coalesce(func.max(Run.id), 0))
+        .where(Run.status == RunState.SUCCEEDED.value, Run.preset == preset)).one()
+    planners = session.scalar(select(func.count(PlannerRow.id))) or 0
+    version = (int(version_row[0]), int(version_row[1]), int(planners))
+    key = (preset, area)
+    with _cache_lock:
+        hit = _cache.get(key)
+    if hit is not None and hit[0] == version:
+        return hit[1].model_copy(deep=True)
+    board = compute_leaderboard(session, preset, area)
+    with _cache_lock:
+        if len(_cache) > 256:
+            _cache.clear()
+        _cache[key] = (version, board)
+    return board.model_copy(deep=True)
+
+
+def compute_leaderboard(session: Session, preset: str, area: str | None = None) -> Leaderboard:
     query = (
         select(PlannerRow.name, PlannerRow.version, PlannerRow.builtin, AreaRow.name, RunResult)
         .join(Run, RunResult.run_id == Run.id)
