@@ -16,7 +16,7 @@ from server.settings import Settings
 bearer = HTTPBearer(auto_error=False, description="an API token from `flybo tokens create`")
 
 
-def get_settings(request: Request) -> Settings:
+async def get_settings(request: Request) -> Settings:
     settings: Settings = request.app.state.settings
     return settings
 
