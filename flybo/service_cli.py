@@ -11,7 +11,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-COMMANDS = ("serve", "worker", "tokens", "submit", "submit-planner", "jobs", "results")
+COMMANDS = ("serve", "worker", "viewer", "tokens", "submit", "submit-planner", "jobs",
+            "results")
 DEFAULT_SERVER = "http://127.0.0.1:8000"
 
 
@@ -30,6 +31,17 @@ def add_service_commands(sub: Any) -> None:
                        help="worker processes to start beside the API (default 1; 0: none)")
     serve.add_argument("--demo", action="store_true",
                        help="create a 'demo' user and submit a short MAZE + Classic job")
+    serve.add_argument("--no-viewer", action="store_true",
+                       help="do not start the 3D replay viewer (FLYBO_VIEWER_PORT)")
+    viewer = sub.add_parser("viewer", help="the 3D replay viewer (viser) for stored runs or a "
+                                           "recording file")
+    viewer.add_argument("--host", default="127.0.0.1")
+    viewer.add_argument("--port", type=int, default=None,
+                        help="default FLYBO_VIEWER_PORT (8080)")
+    viewer.add_argument("--recording", type=Path, default=None,
+                        help="replay this recording file (no database needed)")
+    viewer.add_argument("--compare", type=Path, default=None,
+                        help="with --recording: a second recording on the same area")
     worker = sub.add_parser("worker", help="a Celery worker that runs queued runs")
     worker.add_argument("--concurrency", type=int, default=1,
                         help="runs at once in this worker (default 1)")
@@ -72,7 +84,8 @@ def add_service_commands(sub: Any) -> None:
 
 def run_service_command(args: argparse.Namespace) -> None:
     {"serve": _serve, "worker": _worker, "tokens": _tokens, "submit": _submit, "jobs": _jobs,
-     "results": _results, "submit-planner": _submit_planner}[args.command](args)
+     "results": _results, "submit-planner": _submit_planner,
+     "viewer": _viewer}[args.command](args)
 
 
 def check_planner(path: Path) -> None:
@@ -150,6 +163,24 @@ def _worker(args: argparse.Namespace) -> None:
                      "--without-mingle", f"--loglevel={args.loglevel}"])
 
 
+def _viewer(args: argparse.Namespace) -> None:
+    from web.replay.app import serve_viewer
+
+    settings = _settings()
+    if args.compare is not None and args.recording is None:
+        raise _error("--compare needs --recording")
+    for path in (args.recording, args.compare):
+        if path is not None and not path.is_file():
+            raise _error(f"no recording file {path}")
+    if args.recording is None:
+        _migrated(settings)
+    try:
+        serve_viewer(settings, args.host, args.port or settings.viewer_port,
+                     recording=args.recording, compare=args.compare)
+    except OSError as exc:
+        raise _error(f"cannot start the viewer: {exc}") from None
+
+
 def _serve(args: argparse.Namespace) -> None:
     import uvicorn
 
@@ -162,14 +193,31 @@ def _serve(args: argparse.Namespace) -> None:
     workers = [subprocess.Popen([sys.executable, "-m", "flybo", "worker"])
                for _ in range(max(args.workers, 0))]
     url = f"http://{args.host}:{args.port}"
+    viewer = None
+    if not args.no_viewer:
+        from web.replay.app import start_viewer
+
+        try:
+            viewer = start_viewer(settings, args.host, settings.viewer_port)
+        except OSError as exc:
+            print(f"flybo: the 3D replay viewer did not start ({exc}); the site runs "
+                  "without it", file=sys.stderr)
+        # The viewer takes the next free port when its own is busy: link to where it is,
+        # unless a public address was configured.
+        if viewer is not None and "FLYBO_VIEWER_URL" not in os.environ:
+            settings = settings.model_copy(update={"viewer_url": viewer.url})
     try:
         if args.demo:
             _demo(factory, settings, url)
         print(f"FLYBO is serving at {url}/  (API docs: {url}/docs; {len(workers)} worker(s); "
-              f"data in {settings.resolved_data_dir})", flush=True)
+              f"data in {settings.resolved_data_dir}"
+              + (f"; 3D replay at {viewer.url}" if viewer is not None else "") + ")",
+              flush=True)
         uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level="info",
                     limit_concurrency=MAX_CONCURRENT_REQUESTS)
     finally:
+        if viewer is not None:
+            viewer.stop()
         for proc in workers:
             proc.send_signal(signal.SIGTERM)
         for proc in workers:

@@ -27,8 +27,9 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
     # that close could never run (a deadlock under load). Closing only returns a connection.
     # Reads get sessions that never take SQLite's write lock (see server.db).
     reads = request.method in ("GET", "HEAD")
-    factory: sessionmaker[Session] = (request.app.state.read_sessions if reads
-                                      else request.app.state.sessions)
+    state = request.app.state
+    factory: sessionmaker[Session] = (getattr(state, "read_sessions", state.sessions) if reads
+                                      else state.sessions)
     session = factory()
     try:
         yield session

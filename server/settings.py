@@ -42,6 +42,11 @@ class Settings(BaseSettings):
     max_runs_per_job: int = Field(default=200, ge=1)
     max_seconds_per_run: float = Field(default=3600.0, gt=0)
 
+    # The 3D replay (web/replay): a viser server beside the API.
+    viewer_port: int = Field(default=8080, ge=1, le=65535)
+    viewer_url: str = Field(default="http://127.0.0.1:8080",
+                            description="the viewer's address as browsers reach it")
+
     # HTTP protections (server/middleware.py).
     rate_limit_writes_per_minute: float = Field(default=120.0, ge=0, description="0: off")
     rate_limit_auth_failures_per_minute: float = Field(default=30.0, gt=0)

@@ -16,7 +16,9 @@ def install_web(app: FastAPI) -> None:
     from fastapi.staticfiles import StaticFiles
 
     from web import areas_page, jobs_page, leaderboard_page, planners_page, run_page
+    from web.replay import routes as replay_routes
 
-    for module in (leaderboard_page, areas_page, planners_page, jobs_page, run_page):
+    for module in (leaderboard_page, areas_page, planners_page, jobs_page, run_page,
+                   replay_routes):
         app.include_router(module.router)
     app.mount("/static", StaticFiles(directory=STATIC), name="static")
