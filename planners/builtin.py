@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+from planners.aep import Aep
 from planners.classic import Classic
+from planners.nbvp import Nbvp
+from planners.rapid import Rapid
 from planners.registry import register
 
 register(
@@ -11,4 +14,31 @@ register(
     Classic,
     description="Nearest frontier by path length (Yamauchi 1997), replanned at every waypoint.",
     reference="B. Yamauchi, A frontier-based approach for autonomous exploration, CIRA 1997",
+)
+register(
+    "rapid",
+    1,
+    Rapid,
+    description="Frontier in view needing the least change of velocity direction, flown at full "
+    "speed and replanned in flight; nearest frontier otherwise.",
+    reference="T. Cieslewski, E. Kaufmann, D. Scaramuzza, Rapid exploration with multi-rotors: "
+    "a frontier selection method for high speed flight, IROS 2017",
+)
+register(
+    "nbvp",
+    1,
+    Nbvp,
+    description="Receding-horizon next-best-view: RRT with discounted view gains, first edge of "
+    "the best branch.",
+    reference="A. Bircher, M. Kamel, K. Alexis, H. Oleynikova, R. Siegwart, Receding horizon "
+    "'next-best-view' planner for 3D exploration, ICRA 2016",
+)
+register(
+    "aep",
+    1,
+    Aep,
+    description="NBVP-like local RRT* with best yaws, plus cached high-gain nodes revisited "
+    "when the local gain runs out.",
+    reference="M. Selin, M. Tiger, D. Duberg, F. Heintz, P. Jensfelt, Efficient autonomous "
+    "exploration planning of large-scale 3-D environments, RA-L 2019",
 )

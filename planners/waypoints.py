@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from planners.search import BoolGrid, IndexArray
+from planners.search import BoolGrid, IndexArray, segment_clear
 from sim.map_view import MapView
 
 
@@ -39,12 +39,19 @@ def path_waypoints(
     """(N, 4) waypoints along a voxel path from the vehicle's `position`.
 
     The first path voxel is dropped when it is the vehicle's own (a search may start from a
-    nearby traversable voxel instead, which is then kept). Each waypoint's yaw looks along the
+    nearby traversable voxel instead, which is then kept), unless the straight leg from the
+    vehicle's exact position (not its voxel's centre, where the search started) to the next
+    one leaves the traversable voxels. Each waypoint's yaw looks along the
     leg that ends there, so the camera sees where the vehicle flies; the last looks at `look_at`.
     """
     here = view.world_to_index(np.asarray(position)[None])[0]
     own = len(path) > 0 and bool(np.all(path[0] == here))
-    keep = path[1:] if own and len(path) > 1 else path
+    if own and len(path) > 1:
+        start = (np.asarray(position, dtype=np.float64) - view.origin) / view.voxel_size
+        direct = segment_clear(view.traversable, start, path[1].astype(np.float64) + 0.5)
+        keep = path[1:] if direct else path
+    else:
+        keep = path
     points = view.index_to_world(keep)
     waypoints = np.zeros((len(points), 4))
     waypoints[:, :3] = points

@@ -3,8 +3,9 @@
 `run_episode` is the single entry point used by the CLI and the workers. Per physics step the
 vehicle tracks the reference; at each camera frame the simulator renders depth where a map needs
 it, adds noise, fuses the frame, and samples the metrics; whenever the planner's horizon runs out
-it is asked again. The run ends at the time limit, when the planner says done (the rest of the
-curve is then flat and not simulated), on a collision (`crashed`) or on a planner failure.
+it is asked again (at rest, or mid-flight when the plan asked for it with `Plan.replan_s`).
+The run ends at the time limit, when the planner says done (the rest of the curve is then flat
+and not simulated), on a collision (`crashed`) or on a planner failure.
 """
 
 from __future__ import annotations
@@ -29,7 +30,13 @@ from sim.noise import OdometryDrift, add_depth_noise
 from sim.recording import RecordingWriter
 from sim.result import EpisodeResult, RunStatus
 from sim.search_checks import plan_is_clear
-from sim.trajectory import Trajectory, TrajectoryError, TrajectorySample, plan_trajectory
+from sim.trajectory import (
+    Trajectory,
+    TrajectoryError,
+    TrajectorySample,
+    plan_trajectory,
+    plan_trajectory_from,
+)
 from sim.tsdf import TsdfVolume
 from sim.world import World
 
@@ -77,12 +84,21 @@ class _Flight:
     start_time: float
     stop_after: float  # seconds into the trajectory
     stop_leg: int
+    replan_s: float | None = None  # ask again this often in flight (None: only at the end)
+    next_replan: float = math.inf  # simulated time of the next mid-flight question
 
     def reference(self, now: float) -> TrajectorySample:
         return self.trajectory.sample(min(now - self.start_time, self.stop_after))
 
     def finished(self, now: float) -> bool:
         return now - self.start_time >= self.stop_after - 1e-9
+
+    def replan_due(self, now: float) -> bool:
+        return now >= self.next_replan - 1e-9 and not self.finished(now)
+
+    def schedule_replan(self, now: float, replan_s: float | None) -> None:
+        self.replan_s = replan_s
+        self.next_replan = now + replan_s if replan_s is not None else math.inf
 
 
 @dataclass
@@ -238,6 +254,13 @@ class _EpisodeRunner:
                         break
                     continue
                 failures = 0
+            elif flight.replan_due(self.world.time):
+                # A rejected mid-flight plan costs nothing but the call: the checked flight
+                # goes on, so it does not count toward `max_failed_plans`.
+                flight, outcome, ending = self._replan_in_flight(flight, outcome)
+                if ending is not None:
+                    status, reason = ending
+                    break
             ref = flight.reference(self.world.time)
             if not self._physics_step(ref):
                 status, reason = RunStatus.CRASHED, "collision with the scene"
@@ -253,7 +276,36 @@ class _EpisodeRunner:
             self._extend_flat()
         return self._finish(status, reason, simulated_until, time.perf_counter() - wall0)
 
-    def _ask(self, outcome: PlanOutcome) -> Plan | None:
+    def _replan_in_flight(self, flight: _Flight, outcome: PlanOutcome) -> tuple[
+        _Flight, PlanOutcome, tuple[RunStatus, str] | None
+    ]:
+        """Ask the planner mid-flight; the new plan replaces the rest of `flight` only if it
+        passes the checks, else `flight` is flown on. Returns the flight to follow, the outcome
+        the planner sees next, and (status, reason) if the run ends here."""
+        plan = self._ask(PlanOutcome.FLYING, flight)
+        if plan is None:
+            crashed = self.collisions > 0
+            return flight, outcome, (RunStatus.CRASHED if crashed else RunStatus.FAILED,
+                                     self.failure)
+        if plan.done:
+            return flight, outcome, (RunStatus.SUCCEEDED,
+                                     f"planner finished: {plan.info.get('reason', 'done')}")
+        now = self.world.time
+        if plan.keep:
+            period = plan.replan_s
+            if period is not None and not (math.isfinite(period) and period > 0):
+                # A zero period would ask again without the clock moving.
+                flight.schedule_replan(now, flight.replan_s)
+                return flight, PlanOutcome.INVALID, None
+            flight.schedule_replan(now, period)
+            return flight, PlanOutcome.FLYING, None
+        new, result = self._fly_plan(plan, flight.reference(now))
+        if new is None:
+            flight.schedule_replan(now, flight.replan_s)
+            return flight, result, None
+        return new, result, None
+
+    def _ask(self, outcome: PlanOutcome, flight: _Flight | None = None) -> Plan | None:
         pose = self._estimated_pose()
         self.planned_from = pose.position
         obs = Observation(
@@ -273,7 +325,13 @@ class _EpisodeRunner:
             self.failure = f"planner returned {type(plan).__name__}, not a Plan"
             return None
         if self.cfg.planning_time_charge == "wall" and elapsed > 0:
-            # The vehicle hovers while the planner thinks, as in a real-time system.
+            # The vehicle hovers while the planner thinks, as in a real-time system; asked
+            # mid-flight, it flies on along the current trajectory instead.
+            if flight is not None:
+                if not self._follow(flight, elapsed):
+                    self.failure = "collision while flying"
+                    return None
+                return plan
             here = self._estimated_pose()
             hold = TrajectorySample(here.position, np.zeros(3), np.zeros(3), here.yaw, 0.0)
             if not self._hover(hold, elapsed):
@@ -281,9 +339,11 @@ class _EpisodeRunner:
                 return None
         return plan
 
-    def _fly_plan(self, plan: Plan, rest: npt.NDArray[np.float64]) -> tuple[
+    def _fly_plan(self, plan: Plan, start: npt.NDArray[np.float64] | TrajectorySample) -> tuple[
         _Flight | None, PlanOutcome
     ]:
+        """Check, cut and time-parameterise a plan. `start` is (4,) x, y, z, yaw at rest, or
+        the moving reference state of a flight interrupted by `Plan.replan_s`."""
         wps = np.asarray(plan.waypoints, dtype=np.float64)
         if wps.ndim != 2 or wps.shape[1:] != (4,) or len(wps) == 0 or not np.all(np.isfinite(wps)):
             return None, PlanOutcome.INVALID
@@ -291,24 +351,56 @@ class _EpisodeRunner:
                         (wps[:, :3] <= self.area.bounds_max), axis=1)
         if not np.all(inside):
             return None, PlanOutcome.INVALID
+        replan = plan.replan_s
+        if replan is not None and not (math.isfinite(replan) and replan > 0):
+            return None, PlanOutcome.INVALID
         view = self.mapping.view()
-        clear = plan_is_clear(view.traversable, view.free, view.origin, view.voxel_size, rest[:3],
-                             wps[:, :3])
+        moving = isinstance(start, TrajectorySample)
+        here = start.position if isinstance(start, TrajectorySample) else start[:3]
+        clear = plan_is_clear(view.traversable, view.free, view.origin, view.voxel_size, here,
+                              wps[:, :3])
         if clear == 0:
             return None, PlanOutcome.BLOCKED
         wps = wps[:clear]
         try:
-            traj = plan_trajectory(rest, wps, self.cfg.limits)
+            if isinstance(start, TrajectorySample):
+                traj = plan_trajectory_from(start, wps, self.cfg.limits)
+            else:
+                traj = plan_trajectory(start, wps, self.cfg.limits)
         except TrajectoryError:
             return None, PlanOutcome.INVALID
+        if moving and not self._first_leg_clear(traj, here):
+            return None, PlanOutcome.BLOCKED
         self.recording.plan(self.world.time, wps)
         stop_leg = traj.leg_count - 1
         if plan.horizon_s is not None:
             stop_leg = min(int(np.searchsorted(traj.leg_end_times, plan.horizon_s - 1e-9)),
                            traj.leg_count - 1)
         outcome = PlanOutcome.REACHED if clear == len(plan.waypoints) else PlanOutcome.BLOCKED
-        return _Flight(traj, self.world.time, float(traj.leg_end_times[stop_leg]), stop_leg), \
-            outcome
+        flight = _Flight(traj, self.world.time, float(traj.leg_end_times[stop_leg]), stop_leg)
+        flight.schedule_replan(self.world.time, replan)
+        return flight, outcome
+
+    def _first_leg_clear(self, traj: Trajectory, here: npt.NDArray[np.float64]) -> bool:
+        """The first leg from a moving state is a curve: check it by its samples, close enough
+        (at most half a voxel apart) that the segments between them stand for it. A vehicle
+        outside traversable space may cross known free voxels to get back in, as from rest,
+        but at speed only within one safety radius of where it is."""
+        view = self.mapping.view()
+        dt = 0.5 * view.voxel_size / self.cfg.limits.v_max
+        samples = np.vstack([here[None], traj.positions(float(traj.leg_end_times[0]), dt)])
+        idx = view.world_to_index(samples)
+        if not np.all(view.in_bounds(idx)):
+            return False
+        entered = np.flatnonzero(view.traversable[idx[:, 0], idx[:, 1], idx[:, 2]])
+        if len(entered) == 0:
+            return False
+        first = int(entered[0])
+        escape = float(np.sum(np.linalg.norm(np.diff(samples[: first + 1], axis=0), axis=1)))
+        if escape > self.cfg.safety_radius_m:
+            return False
+        return plan_is_clear(view.traversable, view.free, view.origin, view.voxel_size, here,
+                             samples[1:]) == len(samples) - 1
 
     def _startup_spin(self, rest: npt.NDArray[np.float64]) -> _Flight:
         """One turn in place before the first plan, so that every planner starts from the same
@@ -317,6 +409,14 @@ class _EpisodeRunner:
         turns[:, 3] = rest[3] + np.pi / 2.0 * np.arange(1, 5)
         traj = plan_trajectory(rest, turns, self.cfg.limits)
         return _Flight(traj, self.world.time, traj.duration, traj.leg_count - 1)
+
+    def _follow(self, flight: _Flight, seconds: float) -> bool:
+        """Fly on along `flight` for `seconds` (holding its end if it ends first)."""
+        end = self.world.time + seconds
+        while self.world.time < min(end, self.t_end) - 1e-9:
+            if not self._physics_step(flight.reference(self.world.time)):
+                return False
+        return True
 
     def _hover(self, hold: TrajectorySample, seconds: float) -> bool:
         end = self.world.time + seconds
@@ -378,7 +478,13 @@ class _EpisodeRunner:
             t2 = time.perf_counter()
             costs.occupancy += t2 - t1
             if fuse_tsdf:
-                self.tsdf.integrate(depth, estimate)
+                try:
+                    self.tsdf.integrate(depth, estimate)
+                except RuntimeError as exc:
+                    # A frame with no return within range (open space) has nothing to fuse,
+                    # and Open3D refuses it instead of doing nothing.
+                    if "No block is touched" not in str(exc):
+                        raise
             costs.tsdf += time.perf_counter() - t2
         t3 = time.perf_counter()
         self._sample_metrics(stamp)

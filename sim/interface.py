@@ -26,6 +26,7 @@ class PlanOutcome(enum.StrEnum):
     REACHED = "reached"  # flown to the end, or to the waypoint where the horizon ran out
     BLOCKED = "blocked"  # rejected or cut short by the framework's collision check
     INVALID = "invalid"  # malformed waypoints (NaN, outside the area, wrong shape)
+    FLYING = "flying"  # asked mid-flight (`Plan.replan_s`); the previous plan is still flown
 
 
 @dataclass(frozen=True)
@@ -81,12 +82,20 @@ class Plan:
         waypoints: (N, 4) x, y, z, yaw in the world frame; the vehicle stops at each one.
         horizon_s: ask again at the first waypoint reached after this many seconds of flight;
             0 asks again at the first waypoint, None at the last one.
+        replan_s: ask again after this many seconds of flight even in the middle of a leg
+            (None: never mid-leg, the default). The next plan's trajectory then starts from the
+            vehicle's moving reference state instead of from rest; if that plan is unusable,
+            the current trajectory is flown on.
+        keep: only for a plan returned mid-flight: keep flying the current trajectory and ask
+            again after `replan_s` seconds; waypoints are ignored.
         done: the planner has nothing left to explore; waypoints are ignored.
         info: free-form diagnostics recorded with the iteration (numbers and strings only).
     """
 
     waypoints: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 4)))
     horizon_s: float | None = None
+    replan_s: float | None = None
+    keep: bool = False
     done: bool = False
     info: dict[str, Any] = field(default_factory=dict)
 
@@ -94,7 +103,10 @@ class Plan:
     def finished(cls, reason: str = "no frontier left") -> Plan:
         return cls(done=True, info={"reason": reason})
 
-
+    @classmethod
+    def keep_flying(cls, replan_s: float, info: dict[str, Any] | None = None) -> Plan:
+        """Mid-flight: go on with the current trajectory, ask again after `replan_s`."""
+        return cls(replan_s=replan_s, keep=True, info=info or {})
 
 
 class PlannerLike(Protocol):

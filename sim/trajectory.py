@@ -5,6 +5,10 @@ with phase synchronisation, so the translation follows the straight segment exac
 collision-checked polyline is the path actually flown. The per-axis limits of a leg are the norm
 limits scaled by the leg's direction cosines, which bounds the norms of velocity, acceleration and
 jerk by the vehicle limits.
+
+`plan_trajectory_from` starts instead from a moving state (for planners that replan in flight):
+its first leg cannot follow a straight segment, since the vehicle's velocity need not point at
+the first waypoint, so the framework checks that leg by sampling it (`Trajectory.positions`).
 """
 
 from __future__ import annotations
@@ -21,6 +25,8 @@ from sim.vehicle import VehicleLimits
 
 # Ruckig rejects a zero limit; an axis that does not move gets this instead.
 _MIN_LIMIT = 1e-6
+# Share of the limits every axis keeps on a leg that starts moving (before normalisation).
+_AXIS_FLOOR = 0.25
 
 
 class TrajectoryError(ValueError):
@@ -61,6 +67,13 @@ class Trajectory:
         """Index of the leg active at time t (clamped)."""
         return min(int(np.searchsorted(self.leg_end_times, t, side="right")), len(self._legs) - 1)
 
+    def positions(self, until: float, dt: float) -> FloatArray:
+        """(K, 3) reference positions every `dt` seconds from 0 to `until` (clamped to the
+        duration), both ends included."""
+        end = min(max(until, 0.0), self.duration)
+        times = np.append(np.arange(0.0, end, dt), end)
+        return np.array([self.sample(float(t)).position for t in times])
+
     def sample(self, t: float) -> TrajectorySample:
         """Reference state at time t seconds from the start (clamped to [0, duration])."""
         t = min(max(t, 0.0), self.duration)
@@ -76,6 +89,22 @@ class Trajectory:
         )
 
 
+def _check_waypoints(waypoints: npt.ArrayLike) -> FloatArray:
+    wps = np.asarray(waypoints, dtype=np.float64)
+    if wps.ndim != 2 or wps.shape[1] != 4 or wps.shape[0] == 0:
+        raise TrajectoryError(f"waypoints must have shape (N, 4), got {wps.shape}")
+    if not np.all(np.isfinite(wps)):
+        raise TrajectoryError("waypoints must be finite")
+    return wps
+
+
+def _short_yaw(current_yaw: float, waypoint: FloatArray) -> FloatArray:
+    """The waypoint with its yaw unwrapped next to `current_yaw` (the short way round)."""
+    target = waypoint.copy()
+    target[3] = current_yaw + wrap_angle(waypoint[3] - current_yaw)
+    return target
+
+
 def plan_trajectory(
     start: npt.ArrayLike, waypoints: npt.ArrayLike, limits: VehicleLimits
 ) -> Trajectory:
@@ -88,20 +117,83 @@ def plan_trajectory(
     start_arr = np.asarray(start, dtype=np.float64)
     if start_arr.shape != (4,):
         raise TrajectoryError(f"start must have shape (4,), got {start_arr.shape}")
-    wps = np.asarray(waypoints, dtype=np.float64)
-    if wps.ndim != 2 or wps.shape[1] != 4 or wps.shape[0] == 0:
-        raise TrajectoryError(f"waypoints must have shape (N, 4), got {wps.shape}")
-    if not (np.all(np.isfinite(wps)) and np.all(np.isfinite(start_arr))):
+    wps = _check_waypoints(waypoints)
+    if not np.all(np.isfinite(start_arr)):
         raise TrajectoryError("waypoints must be finite")
     otg = Ruckig(4)
     legs: list[RuckigTrajectory] = []
     current = start_arr.copy()
     for wp in wps:
-        target = wp.copy()
-        target[3] = current[3] + wrap_angle(wp[3] - current[3])
+        target = _short_yaw(float(current[3]), wp)
         legs.append(_leg(otg, current, target, limits))
         current = target
     return Trajectory(legs, wps)
+
+
+def plan_trajectory_from(
+    state: TrajectorySample, waypoints: npt.ArrayLike, limits: VehicleLimits
+) -> Trajectory:
+    """Trajectory from a moving reference `state` through every waypoint, stopping at each.
+
+    The first leg starts with the state's velocity, acceleration and yaw rate; the following
+    legs are straight rest-to-rest legs as in `plan_trajectory`.
+    """
+    wps = _check_waypoints(waypoints)
+    start = np.array([*state.position, state.yaw], dtype=np.float64)
+    moving = np.array([*state.velocity, state.yaw_rate], dtype=np.float64)
+    accel = np.array([*state.acceleration, 0.0], dtype=np.float64)
+    if not (np.all(np.isfinite(start)) and np.all(np.isfinite(moving))
+            and np.all(np.isfinite(accel))):
+        raise TrajectoryError("the start state must be finite")
+    otg = Ruckig(4)
+    first = _short_yaw(float(start[3]), wps[0])
+    legs = [_moving_leg(otg, start, moving, accel, first, limits)]
+    current = first
+    for wp in wps[1:]:
+        target = _short_yaw(float(current[3]), wp)
+        legs.append(_leg(otg, current, target, limits))
+        current = target
+    return Trajectory(legs, wps)
+
+
+def _moving_leg(
+    otg: Ruckig, start: FloatArray, velocity: FloatArray, acceleration: FloatArray,
+    target: FloatArray, limits: VehicleLimits,
+) -> RuckigTrajectory:
+    """A leg from a moving state to rest at `target`, time-synchronised.
+
+    Per-axis limits are the norm limits times the components of a unit vector, so the norms
+    stay within the vehicle limits; the vector leans toward the leg's direction, the current
+    velocity and the current acceleration, plus a floor on every axis: an axis with almost no
+    limit but some motion left to undo would take ruckig minutes to settle. An axis whose
+    current velocity or acceleration exceeds its limit is braked back into it by ruckig.
+    """
+    delta = target[:3] - start[:3]
+    length = float(np.linalg.norm(delta))
+    leg_dir = np.abs(delta) / length if length > 1e-9 else np.zeros(3)
+    speed = float(np.linalg.norm(velocity[:3]))
+    vel_dir = np.abs(velocity[:3]) / speed if speed > 1e-9 else np.zeros(3)
+    accel = float(np.linalg.norm(acceleration[:3]))
+    acc_dir = np.abs(acceleration[:3]) / accel if accel > 1e-9 else np.zeros(3)
+    blend = (leg_dir + min(speed / limits.v_max, 1.0) * vel_dir
+             + min(accel / limits.a_max, 1.0) * acc_dir + _AXIS_FLOOR)
+    norm = float(np.linalg.norm(blend))
+    weights = blend / norm if norm > 1e-12 else np.full(3, 1.0 / np.sqrt(3.0))
+    inp = InputParameter(4)
+    inp.current_position = start.tolist()
+    inp.current_velocity = velocity.tolist()
+    inp.current_acceleration = acceleration.tolist()
+    inp.target_position = target.tolist()
+    inp.max_velocity = [*np.maximum(limits.v_max * weights, _MIN_LIMIT), limits.yaw_rate_max]
+    inp.max_acceleration = [*np.maximum(limits.a_max * weights, _MIN_LIMIT),
+                            limits.yaw_acc_max]
+    inp.max_jerk = [*np.maximum(limits.j_max * weights, _MIN_LIMIT), limits.yaw_jerk_max]
+    inp.synchronization = Synchronization.Time
+    traj = RuckigTrajectory(4)
+    result = otg.calculate(inp, traj)
+    if result not in (Result.Working, Result.Finished):
+        raise TrajectoryError(f"ruckig could not reach {target.tolist()}: {result}")
+    return traj
 
 
 def _leg(

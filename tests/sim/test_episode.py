@@ -9,6 +9,7 @@ from areas import load_area, load_ground_truth
 from planners.registry import make
 from sim.config import preset
 from sim.episode import run_episode
+from sim.interface import Observation, Plan, PlannerContext, PlanOutcome
 from sim.recording import Recording
 from sim.result import EpisodeResult, RunStatus
 
@@ -90,3 +91,73 @@ def test_planner_exception_fails_the_run() -> None:
                          seconds=20.0)  # type: ignore[arg-type]
     assert result.status is RunStatus.FAILED
     assert "boom" in result.reason
+
+
+class _Shuttle:
+    """Flies between two points near the start, asking to be asked again mid-flight; every
+    other mid-flight call keeps the current trajectory."""
+
+    def __init__(self, replan_s: float, finish_after_calls: int = 10**9) -> None:
+        self.replan_s = replan_s
+        self.finish_after_calls = finish_after_calls
+        self.calls: list[tuple[float, str, float]] = []
+
+    def reset(self, ctx: PlannerContext) -> None:
+        self.start = ctx.start.position.copy()
+
+    def plan(self, obs: Observation) -> Plan:
+        speed = float(np.linalg.norm(obs.velocity))
+        self.calls.append((obs.time, obs.last_outcome.value, speed))
+        if len(self.calls) > self.finish_after_calls:
+            return Plan.finished("enough")
+        if obs.last_outcome is PlanOutcome.FLYING and len(self.calls) % 2 == 0:
+            return Plan.keep_flying(self.replan_s)
+        side = 1.0 if len(self.calls) % 12 < 6 else -1.0
+        goal = self.start + np.array([0.3 * side, 0.2 * side, 0.0])
+        return Plan(np.array([[*goal, 0.5 * side]]), replan_s=self.replan_s)
+
+
+def _shuttle_run(planner: _Shuttle, seconds: float) -> EpisodeResult:
+    area = load_area("maze")
+    return run_episode(area, load_ground_truth(area), planner, preset("exact"), 0,  # type: ignore[arg-type]
+                       seconds=seconds)
+
+
+def test_replanning_in_flight_starts_from_the_moving_state() -> None:
+    planner = _Shuttle(replan_s=0.25)
+    result = _shuttle_run(planner, 16.0)
+    assert result.status is RunStatus.SUCCEEDED, result.reason
+    assert result.collisions == 0
+    flying = [c for c in planner.calls if c[1] == "flying"]
+    assert len(flying) > 10
+    # Asked while moving, at the requested period of flight.
+    assert max(c[2] for c in flying) > 0.1
+    times = np.array([c[0] for c in planner.calls])
+    assert np.median(np.diff(times)) == pytest.approx(0.25, abs=0.02)
+    # The vehicle shuttled: it flew much more than one 0.72 m leg.
+    assert result.path_length_m > 2.0
+
+
+def test_finishing_in_flight_ends_the_run() -> None:
+    planner = _Shuttle(replan_s=0.25, finish_after_calls=5)
+    result = _shuttle_run(planner, 14.0)
+    assert result.status is RunStatus.SUCCEEDED
+    assert "enough" in result.reason
+    assert planner.calls[-1][1] == "flying"
+    assert result.simulated_until == pytest.approx(planner.calls[-1][0], abs=0.02)
+    assert len(result.volume_m3) == 15  # the curve is still filled to the end
+
+
+def test_keeping_with_a_zero_period_does_not_stall_the_clock() -> None:
+    class ZeroKeep(_Shuttle):
+        def plan(self, obs: Observation) -> Plan:
+            if obs.last_outcome in (PlanOutcome.FLYING, PlanOutcome.INVALID):
+                self.calls.append((obs.time, obs.last_outcome.value, 0.0))
+                return Plan.keep_flying(0.0)
+            return super().plan(obs)
+
+    planner = ZeroKeep(replan_s=0.25)
+    result = _shuttle_run(planner, 10.0)
+    assert result.status is RunStatus.SUCCEEDED, result.reason
+    times = np.array([c[0] for c in planner.calls])
+    assert np.all(np.diff(times) > 0.1)  # asked again only after the flight's own period

@@ -9,7 +9,13 @@ import numpy.typing as npt
 import pytest
 
 from sim.geometry import wrap_angle
-from sim.trajectory import Trajectory, TrajectoryError, TrajectorySample, plan_trajectory
+from sim.trajectory import (
+    Trajectory,
+    TrajectoryError,
+    TrajectorySample,
+    plan_trajectory,
+    plan_trajectory_from,
+)
 from sim.vehicle import VehicleLimits
 
 FloatArray = npt.NDArray[np.float64]
@@ -221,3 +227,63 @@ def test_tighter_limits_slow_the_trajectory_down() -> None:
     assert np.linalg.norm(s.acceleration, axis=1).max() <= 1.0 * (1 + 1e-6)
     fast = plan_trajectory(START, WAYPOINTS[:2], LIMITS)
     assert traj.duration > fast.duration
+
+
+# -- from a moving state ------------------------------------------------------------------------
+
+MOVING = TrajectorySample(
+    position=np.array([0.0, 0.0, 1.0]),
+    velocity=np.array([1.2, -0.6, 0.1]),
+    acceleration=np.array([-0.5, 1.0, 0.0]),
+    yaw=0.3,
+    yaw_rate=0.4,
+)
+
+
+@pytest.mark.parametrize(
+    "waypoints",
+    [
+        np.array([[3.0, 0.5, 1.0, 0.0]]),  # roughly ahead
+        np.array([[-2.0, 1.0, 1.2, 2.5]]),  # behind: the vehicle must turn back
+        np.array([[0.3, -0.2, 1.0, 0.3], [1.0, 2.0, 1.5, 1.0]]),  # close, then a straight leg
+        np.array([[1.0, 0.0, 1.0001, 0.3]]),  # an axis with almost nothing to do
+    ],
+)
+def test_from_a_moving_state(waypoints: FloatArray) -> None:
+    traj = plan_trajectory_from(MOVING, waypoints, LIMITS)
+    start = traj.sample(0.0)
+    # Continuous with the state it starts from.
+    assert start.position == pytest.approx(MOVING.position, abs=1e-9)
+    assert start.velocity == pytest.approx(MOVING.velocity, abs=1e-9)
+    assert start.acceleration == pytest.approx(MOVING.acceleration, abs=1e-9)
+    assert start.yaw_rate == pytest.approx(MOVING.yaw_rate, abs=1e-9)
+    s = sample_densely(traj, dt=0.005)
+    assert np.linalg.norm(s.velocity, axis=1).max() <= LIMITS.v_max * (1 + 1e-6)
+    assert np.abs(s.yaw_rate).max() <= LIMITS.yaw_rate_max * (1 + 1e-6)
+    # At rest at every waypoint; no leg takes minutes.
+    for t_end, wp in zip(traj.leg_end_times, waypoints, strict=True):
+        end = traj.sample(float(t_end))
+        assert end.position == pytest.approx(wp[:3], abs=1e-9)
+        assert np.linalg.norm(end.velocity) < 1e-9
+        assert wrap_angle(end.yaw) == pytest.approx(wrap_angle(wp[3]), abs=1e-9)
+    assert traj.duration < 12.0
+    # Legs after the first are straight and rest to rest, as from rest.
+    if len(waypoints) > 1:
+        rest = plan_trajectory(waypoints[0], waypoints[1:], LIMITS)
+        assert traj.leg_end_times[1] - traj.leg_end_times[0] == pytest.approx(rest.duration)
+
+
+def test_positions_sample_the_flown_curve() -> None:
+    traj = plan_trajectory_from(MOVING, np.array([[-2.0, 1.0, 1.2, 2.5]]), LIMITS)
+    points = traj.positions(traj.duration, 0.01)
+    assert points[0] == pytest.approx(MOVING.position)
+    assert points[-1] == pytest.approx([-2.0, 1.0, 1.2])
+    assert np.linalg.norm(np.diff(points, axis=0), axis=1).max() <= LIMITS.v_max * 0.01 + 1e-9
+    # The vehicle first goes on forward: the curve is not the straight segment.
+    assert points[:, 0].max() > 0.2
+
+
+def test_from_a_non_finite_state_raises() -> None:
+    bad = TrajectorySample(np.array([0.0, np.nan, 1.0]), np.zeros(3), np.zeros(3), 0.0, 0.0)
+    with pytest.raises(TrajectoryError):
+        plan_trajectory_from(bad, WAYPOINTS[:1], LIMITS)

@@ -1,0 +1,125 @@
+"""AEP: autonomous exploration planning (Selin et al., RA-L 2019).
+
+Local exploration as in NBVP, with an RRT* tree whose nodes look along their best yaw; nodes
+whose view gains more than `zero_gain` are cached in a spatial index. When no local branch is
+worth `zero_gain`, the cached nodes are re-evaluated on the current map (best first, by their
+cached gain discounted by the straight-line distance, an upper bound of their worth) and the
+vehicle flies a shortest grid path to the one with the best gain * exp(-lambda * path length).
+Exploration ends when no cached node gains more than `zero_gain`.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+from pydantic import Field
+
+from planners.api import Observation, Plan, PlannerContext
+from planners.nbv_tree import TreeOutcome
+from planners.nbvp import Nbvp, NbvpConfig
+from planners.spatial import SpatialIndex
+
+FloatArray = npt.NDArray[np.float64]
+
+
+class AepConfig(NbvpConfig):
+    """AEP's settings. Unless noted, defaults are those of the public AEP configuration the
+    benchmark's authors used on MAZE (`aep/...` keys of its `maze.yaml`)."""
+
+    # aep/tree/extension_range: 1.5
+    extension_m: float = Field(1.5, gt=0.0)
+    # aep/tree/max_sampling_radius: 10
+    sampling_radius_m: float | None = Field(10.0, gt=0.0)
+    # aep/tree/initial_iterations: 15
+    min_nodes: int = Field(15, ge=1)
+    # aep/tree/cutoff_iterations: 30
+    max_nodes: int = Field(30, ge=1)
+    # aep/gain/lambda: 0.75
+    degressive_coeff: float = Field(0.75, ge=0.0)
+    # aep/gain/zero: 1
+    zero_gain: float = Field(1.0, ge=0.0)
+    # aep/gain/r_max: 5
+    gain_range_m: float | None = Field(5.0, gt=0.0)
+    # AEP picks the best yaw of each node.
+    yaw: Literal["random", "best"] = "best"
+    # AEP grows an RRT*; our choice of radius: one extension range.
+    rewire_radius_m: float | None = Field(1.5, gt=0.0)
+    # raycast/dphi, raycast/dtheta: 10 (degrees)
+    ray_step_deg: float = Field(10.0, gt=0.0, le=30.0)
+    # Our choice: one cached node per half metre keeps the cache small; AEP caches every node.
+    cache_spacing_m: float = Field(0.5, gt=0.0)
+
+
+class Aep(Nbvp):
+    config_model = AepConfig
+    config: AepConfig
+
+    def reset(self, ctx: PlannerContext) -> None:
+        super().reset(ctx)
+        self._cache = SpatialIndex(cell_m=max(self.config.cache_spacing_m, 0.5))
+
+    def grow(self, obs: Observation, root: FloatArray) -> TreeOutcome:
+        outcome = super().grow(obs, root)
+        self._remember(outcome)
+        return outcome
+
+    def _remember(self, outcome: TreeOutcome) -> None:
+        """Cache every node whose own view gains more than `zero_gain`; a node near a cached
+        one refreshes that entry instead of adding another."""
+        tree, cfg = outcome.tree, self.config
+        for n in range(1, tree.size):
+            gain = float(tree.gains[n])
+            near = self._cache.nearest(tree.positions[n], cfg.cache_spacing_m)
+            if near is not None:
+                if gain > self._cache.value(near):
+                    self._cache.update(near, gain, float(tree.yaws[n]))
+                continue
+            if gain > cfg.zero_gain:
+                self._cache.insert(tree.positions[n], gain, float(tree.yaws[n]))
+
+    def no_local_gain(self, obs: Observation, outcome: TreeOutcome) -> Plan:
+        """Global step: fly to the cached node worth the most now."""
+        cfg, view = self.config, obs.map
+        here = np.asarray(obs.pose.position, dtype=np.float64)
+        gains = self.gain_evaluator(view.voxel_size)
+        ids = self._cache.ids()
+        if len(ids) == 0:
+            return Plan.finished("no cached node left")
+        dist = np.linalg.norm(self._cache.points(ids) - here, axis=1)
+        # Upper bounds of each node's worth: gains only shrink as the map fills in, and a
+        # path is never shorter than the straight line.
+        bounds = self._cache.values(ids) * np.exp(-cfg.degressive_coeff * dist)
+        heap = [(-float(b), int(i)) for b, i in zip(bounds, ids, strict=True)]
+        heapq.heapify(heap)
+        best: tuple[float, FloatArray] | None = None
+        evaluated = 0
+        while heap and (best is None or -heap[0][0] > best[0]):
+            _, ident = heapq.heappop(heap)
+            point = self._cache.point(ident)
+            view_gain = gains.best_view(view, point)
+            evaluated += 1
+            if view_gain.gain <= cfg.zero_gain:
+                self._cache.remove(ident)
+                continue
+            self._cache.update(ident, view_gain.gain, view_gain.yaw)
+            waypoints = self._path_to(obs, point, view_gain.yaw)
+            if waypoints is None:
+                if np.linalg.norm(point - here) < self.config.cache_spacing_m:
+                    # Standing on it already: its gain must come from turning on the spot.
+                    waypoints = np.array([[*here, view_gain.yaw]])
+                else:
+                    self._cache.remove(ident)
+                    continue
+            length = float(np.sum(np.linalg.norm(np.diff(np.vstack([here, waypoints[:, :3]]),
+                                                         axis=0), axis=1)))
+            score = view_gain.gain * math.exp(-cfg.degressive_coeff * length)
+            if best is None or score > best[0]:
+                best = (score, waypoints)
+        if best is None:
+            return Plan.finished("no cached node gains more than the threshold")
+        return Plan(best[1], info={"mode": "global", "candidates": len(ids),
+                                   "evaluated": evaluated, "score": best[0]})

@@ -1,0 +1,75 @@
+"""Frontiers for planners: the clusters the framework keeps (with centroid and mean normal, see
+`sim.frontiers.FrontierTracker`) and the frontier voxels inside the camera's current view.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+from scipy import ndimage
+
+from planners.search import IndexArray
+from sim.camera import CameraConfig
+from sim.geometry import Pose
+from sim.map_view import FrontierCluster, MapView
+
+__all__ = ["FrontierCluster", "clusters", "frontiers_in_view"]
+
+FloatArray = npt.NDArray[np.float64]
+
+
+def clusters(view: MapView, min_size: int) -> list[FrontierCluster]:
+    """Frontier clusters of at least `min_size` voxels, each with its voxel indices, centroid
+    (world) and mean normal pointing into the unknown; kept up to date by the framework."""
+    return view.frontier_clusters(min_size)
+
+
+_CONNECT_26 = np.ones((3, 3, 3), dtype=bool)
+
+
+def frontiers_in_view(
+    view: MapView, pose: Pose, camera: CameraConfig, max_range_m: float | None = None,
+    min_group_size: int = 1,
+) -> tuple[IndexArray, FloatArray]:
+    """Frontier voxels whose centres lie in the camera frustum of a level `pose`.
+
+    Only the box of the sensor range around the pose is scanned, so the cost does not grow
+    with the area. With `min_group_size`, voxels of 26-connected frontier groups smaller than
+    that inside the box are left out (isolated frontier voxels are mostly sensor noise); the
+    groups are labelled in the box only, far cheaper than clustering the whole map.
+
+    Returns:
+        (F, 3) int64 voxel indices and (F, 3) float64 offsets of their centres from the pose
+        position (world metres), F >= 0.
+    """
+    reach = camera.max_range_m if max_range_m is None else max_range_m
+    here = np.asarray(pose.position, dtype=np.float64)
+    lo = np.maximum(view.world_to_index((here - reach)[None])[0], 0)
+    hi = np.minimum(view.world_to_index((here + reach)[None])[0] + 1, np.array(view.shape))
+    if np.any(hi <= lo):
+        return np.zeros((0, 3), dtype=np.int64), np.zeros((0, 3))
+    sub = view.frontier[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
+    if min_group_size > 1:
+        labels, _ = ndimage.label(sub, structure=_CONNECT_26)
+        sizes = np.bincount(labels.ravel())
+        sizes[0] = 0
+        sub = sizes[labels] >= min_group_size
+    idx = np.argwhere(sub) + lo
+    if len(idx) == 0:
+        return idx.astype(np.int64), np.zeros((0, 3))
+    offsets = view.index_to_world(idx) - here
+    c, s = np.cos(pose.yaw), np.sin(pose.yaw)
+    forward = offsets[:, 0] * c + offsets[:, 1] * s
+    left = -offsets[:, 0] * s + offsets[:, 1] * c
+    up = offsets[:, 2]
+    half_h = np.radians(camera.fov_h_deg) / 2.0
+    half_v = np.radians(camera.fov_v_deg) / 2.0
+    dist = np.linalg.norm(offsets, axis=1)
+    inside = (
+        (forward > 0.0)
+        & (np.abs(left) <= forward * np.tan(half_h))
+        & (np.abs(up) <= forward * np.tan(half_v))
+        & (dist <= reach)
+        & (dist >= camera.min_range_m)
+    )
+    return idx[inside].astype(np.int64), offsets[inside]

@@ -1,0 +1,152 @@
+"""The receding-horizon next-best-view tree shared by NBVP and AEP.
+
+A random tree grows from the vehicle in traversable space; each new node gets the gain of its
+view (`planners.gain`), at a random yaw (NBVP) or at its best yaw (AEP), and a branch value
+
+    value(n) = value(parent(n)) + gain(n) * exp(-lambda * cost(n)),
+
+cost being the path length from the root (Bircher et al., ICRA 2016, eq. 1). Growth goes on
+until the tree has `min_nodes` nodes and some branch is worth more than `zero_gain`, or gives
+up at `max_nodes` nodes. The previous iteration's best branch, less its flown first edge, seeds
+the new tree so that a good plan is not lost to sampling.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from planners.gain import GainEvaluator
+from planners.lines import segment_clear_world
+from planners.rrt import Tree, extend
+from sim.map_view import MapView
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class TreeSettings:
+    """How the tree grows and what a branch is worth (see the planners' configs)."""
+
+    extension_m: float
+    sampling_radius_m: float | None  # half-size of the sampling box; None: the whole area
+    min_nodes: int
+    max_nodes: int
+    max_failures_per_node: int
+    degressive_coeff: float
+    zero_gain: float
+    rewire_radius_m: float | None  # None: plain RRT
+    yaw: Literal["random", "best"]
+
+
+@dataclass
+class TreeOutcome:
+    """A grown tree and its best node (-1 when the tree is only its root)."""
+
+    tree: Tree
+    best: int
+    best_value: float
+    gain_found: bool
+    stalled: bool  # too many failed samples: the tree cannot grow from here
+
+
+def _node_gain(gains: GainEvaluator, view: MapView, position: FloatArray, yaw_mode: str,
+               rng: np.random.Generator) -> tuple[float, float]:
+    columns = gains.columns(view, position)
+    if yaw_mode == "best":
+        best = gains.best(columns)
+        return best.yaw, best.gain
+    yaw = float(rng.uniform(-math.pi, math.pi))
+    return yaw, gains.at_yaw(columns, yaw)
+
+
+def _values(tree: Tree, degressive: float) -> FloatArray:
+    """(N,) branch values from the node gains, whatever the order of ids (RRT* re-hangs
+    nodes under newer ones): pointer jumping, each round doubling the ancestors summed."""
+    acc = tree.gains * np.exp(-degressive * tree.costs)
+    up = tree.parents.copy()
+    while np.any(up >= 0):
+        has = up >= 0
+        new_acc = acc.copy()
+        new_acc[has] += acc[up[has]]
+        new_up = up.copy()
+        new_up[has] = up[up[has]]
+        acc, up = new_acc, new_up
+    return acc
+
+
+def grow_tree(
+    view: MapView,
+    gains: GainEvaluator,
+    settings: TreeSettings,
+    rng: np.random.Generator,
+    root: FloatArray,
+    root_yaw: float,
+    bounds_min: FloatArray,
+    bounds_max: FloatArray,
+    seed_branch: FloatArray | None = None,
+) -> TreeOutcome:
+    """Grow a tree from `root` (world (3,)).
+
+    Args:
+        seed_branch: (M, 4) x, y, z, yaw of the previous best branch, re-inserted as a chain
+            from the root as far as its edges are still clear.
+    """
+    tree = Tree(root, root_yaw)
+    if seed_branch is not None:
+        parent = 0
+        for row in seed_branch:
+            p = row[:3]
+            voxel = view.world_to_index(p[None])[0]
+            if not (np.all(view.in_bounds(voxel[None]))
+                    and view.traversable[voxel[0], voxel[1], voxel[2]]
+                    and segment_clear_world(view, view.traversable, tree.positions[parent], p)):
+                break
+            parent = tree.add(p.copy(), parent, float(row[3]))
+            yaw, gain = _node_gain(gains, view, p, settings.yaw, rng)
+            tree.gains[parent] = gain
+            tree.yaws[parent] = yaw
+    values = _values(tree, settings.degressive_coeff)
+    lo, hi = bounds_min, bounds_max
+    if settings.sampling_radius_m is not None:
+        lo = np.maximum(lo, root - settings.sampling_radius_m)
+        hi = np.minimum(hi, root + settings.sampling_radius_m)
+    failures = 0
+    stalled = False
+    while True:
+        nodes = tree.size - 1
+        best_value = float(values[1:].max()) if nodes else 0.0
+        if nodes >= settings.min_nodes and best_value > settings.zero_gain:
+            break
+        if nodes >= settings.max_nodes:
+            break
+        if failures > settings.max_failures_per_node * (nodes + 1):
+            stalled = True
+            break
+        sample = rng.uniform(lo, hi)
+        before = tree.size
+        node = extend(tree, view, sample, settings.extension_m,
+                      rewire_radius_m=settings.rewire_radius_m)
+        if node < 0:
+            failures += 1
+            continue
+        yaw, gain = _node_gain(gains, view, tree.positions[node], settings.yaw, rng)
+        tree.yaws[node] = yaw
+        tree.gains[node] = gain
+        if settings.rewire_radius_m is None and tree.size == before + 1:
+            # Plain RRT never re-hangs nodes: the new value follows from its parent's.
+            parent = int(tree.parents[node])
+            values = np.append(values, values[parent] + gain * math.exp(
+                -settings.degressive_coeff * tree.costs[node]))
+        else:
+            values = _values(tree, settings.degressive_coeff)
+    if tree.size == 1:
+        return TreeOutcome(tree, -1, 0.0, False, stalled)
+    best = int(np.argmax(values[1:])) + 1
+    tree.values[:] = values
+    best_value = float(values[best])
+    return TreeOutcome(tree, best, best_value, best_value > settings.zero_gain, stalled)

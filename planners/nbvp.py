@@ -1,0 +1,157 @@
+"""NBVP: receding-horizon next-best-view planning (Bircher et al., ICRA 2016).
+
+At each iteration a random tree grows from the vehicle in known traversable space
+(`planners.nbv_tree`); each node sees the unknown volume of its camera view, discounted by
+exp(-lambda * path cost) and accumulated along its branch. Only the first edge of the best branch
+is flown; the rest of the branch seeds the next tree. Exploration ends when, with `max_nodes`
+nodes, no branch is worth more than `zero_gain`. When the tree cannot grow at all, the vehicle
+goes back to the previous iteration's position, as the original does.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+from pydantic import Field
+
+from planners.api import Observation, Plan, Planner, PlannerConfig, PlannerContext
+from planners.astar import PathCache
+from planners.gain import GainEvaluator
+from planners.nbv_tree import TreeOutcome, TreeSettings, grow_tree
+from planners.search import shortcut
+from planners.waypoints import nearest_traversable, path_waypoints
+
+FloatArray = npt.NDArray[np.float64]
+
+
+class NbvpConfig(PlannerConfig):
+    """NBVP's settings. Unless noted, defaults are those of the public NBVP configuration the
+    benchmark's authors used on MAZE (`nbvp/...` keys of its `maze.yaml`)."""
+
+    # nbvp/tree/extension_range: 1.5
+    extension_m: float = Field(1.5, gt=0.0, description="RRT extension range, m")
+    # NBVP samples in the whole exploration box.
+    sampling_radius_m: float | None = Field(None, gt=0.0)
+    # nbvp/tree/initial_iterations: 15
+    min_nodes: int = Field(15, ge=1)
+    # nbvp/tree/cuttoff_iterations: 400
+    max_nodes: int = Field(400, ge=1)
+    # NBVP returns to the previous position after 1000 * (nodes + 1) failed samples.
+    max_failures_per_node: int = Field(1000, ge=1)
+    # nbvp/gain/degressive_coeff: 0.5
+    degressive_coeff: float = Field(0.5, ge=0.0, description="lambda, 1/m")
+    # nbvp/gain/zero: 1 (the original's gain is an unknown volume in m³)
+    zero_gain: float = Field(1.0, ge=0.0, description="m³")
+    # nbvp/gain/range: 5.0 (the camera's range)
+    gain_range_m: float | None = Field(5.0, gt=0.0)
+    # NBVP samples a random yaw per node.
+    yaw: Literal["random", "best"] = "random"
+    # RRT in NBVP; RRT* when set (AEP).
+    rewire_radius_m: float | None = Field(None, gt=0.0)
+    # Our choice: 5° rays resolve a 0.2 m voxel at 2.3 m; the original visits every voxel.
+    ray_step_deg: float = Field(5.0, gt=0.0, le=30.0)
+
+    def tree_settings(self) -> TreeSettings:
+        return TreeSettings(
+            extension_m=self.extension_m, sampling_radius_m=self.sampling_radius_m,
+            min_nodes=self.min_nodes, max_nodes=self.max_nodes,
+            max_failures_per_node=self.max_failures_per_node,
+            degressive_coeff=self.degressive_coeff, zero_gain=self.zero_gain,
+            rewire_radius_m=self.rewire_radius_m, yaw=self.yaw,
+        )
+
+
+class Nbvp(Planner):
+    config_model = NbvpConfig
+    config: NbvpConfig
+
+    def reset(self, ctx: PlannerContext) -> None:
+        super().reset(ctx)
+        self._gains: GainEvaluator | None = None
+        self._seed: FloatArray | None = None  # (M, 4) rest of the last best branch
+        self._previous: list[FloatArray] = []  # roots of past iterations
+        self._paths = PathCache()
+
+    def gain_evaluator(self, voxel_size: float) -> GainEvaluator:
+        if self._gains is None:
+            self._gains = GainEvaluator(self.context.camera, self.config.ray_step_deg,
+                                        voxel_size, self.config.gain_range_m)
+        return self._gains
+
+    def plan(self, obs: Observation) -> Plan:
+        here = np.asarray(obs.pose.position, dtype=np.float64)
+        root, snapped = self._root(obs)
+        if root is None:
+            return Plan.finished("the vehicle is not in traversable space")
+        outcome = self.grow(obs, root)
+        if outcome.best >= 0 and outcome.gain_found:
+            return self._first_edge(outcome, snapped, obs)
+        self._seed = None
+        if outcome.stalled:
+            # The tree cannot grow from here: go back the way the vehicle came, as NBVP does.
+            while self._previous:
+                back = self._path_to(obs, self._previous.pop())
+                if back is not None:
+                    return Plan(back, info={"mode": "back", "nodes": int(outcome.tree.size)})
+        self._previous.append(here.copy())
+        return self.no_local_gain(obs, outcome)
+
+    def grow(self, obs: Observation, root: FloatArray) -> TreeOutcome:
+        ctx = self.context
+        return grow_tree(obs.map, self.gain_evaluator(obs.map.voxel_size),
+                         self.config.tree_settings(), ctx.rng, root, obs.pose.yaw,
+                         ctx.bounds_min, ctx.bounds_max, self._seed)
+
+    def no_local_gain(self, obs: Observation, outcome: TreeOutcome) -> Plan:
+        """What to do when no branch is worth `zero_gain`: NBVP stops."""
+        plan = Plan.finished(f"no branch gains more than {self.config.zero_gain} m³")
+        plan.info.update(nodes=int(outcome.tree.size), stalled=str(outcome.stalled))
+        return plan
+
+    def _root(self, obs: Observation) -> tuple[FloatArray | None, bool]:
+        """The tree's root: the vehicle's position, or the nearest traversable voxel centre if
+        the vehicle stands where the map no longer allows (True then)."""
+        view = obs.map
+        here = np.asarray(obs.pose.position, dtype=np.float64)
+        voxel = view.world_to_index(here[None])[0]
+        start = nearest_traversable(view.traversable, voxel)
+        if start is None:
+            return None, False
+        if np.array_equal(start, voxel):
+            return here.copy(), False
+        return view.index_to_world(start[None])[0], True
+
+    def _first_edge(self, outcome: TreeOutcome, snapped: bool, obs: Observation) -> Plan:
+        tree = outcome.tree
+        branch = tree.branch(outcome.best)
+        nodes = np.column_stack([tree.positions[branch], tree.yaws[branch]])
+        self._seed = nodes[2:].copy() if len(nodes) > 2 else None
+        self._previous.append(np.asarray(obs.pose.position, dtype=np.float64).copy())
+        waypoints = nodes[1:2].copy()
+        if snapped:
+            first = np.array([[*tree.positions[0], waypoints[0, 3]]])
+            waypoints = np.vstack([first, waypoints])
+        return Plan(waypoints, info={
+            "mode": "local", "nodes": int(tree.size), "best_value": outcome.best_value,
+            "best_gain": float(tree.gains[outcome.best]),
+        })
+
+    def _path_to(self, obs: Observation, target: FloatArray,
+                 yaw: float | None = None) -> FloatArray | None:
+        """(N, 4) waypoints of a shortest grid path to `target`, or None if unreachable."""
+        view = obs.map
+        here = view.world_to_index(np.asarray(obs.pose.position)[None])[0]
+        start = nearest_traversable(view.traversable, here)
+        goal = nearest_traversable(view.traversable, view.world_to_index(target[None])[0])
+        if start is None or goal is None or np.array_equal(start, goal):
+            return None
+        path, _ = self._paths.path(view.traversable, start, goal, view.voxel_size)
+        if len(path) < 2:
+            return None
+        path = shortcut(path, view.traversable)
+        look = target if yaw is None else view.index_to_world(goal[None])[0] + np.array(
+            [np.cos(yaw), np.sin(yaw), 0.0])
+        waypoints: FloatArray = path_waypoints(view, path, obs.pose.position, look)
+        return waypoints

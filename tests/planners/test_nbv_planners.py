@@ -1,0 +1,183 @@
+"""Rapid, NBVP and AEP on maps made by hand: what each decides, and why."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from planners.aep import Aep
+from planners.gain import GainEvaluator
+from planners.nbv_tree import TreeSettings, grow_tree
+from planners.registry import make
+from sim.camera import CameraConfig
+from sim.geometry import Pose
+from sim.interface import Observation, PlannerContext, PlanOutcome
+from sim.occupancy import VoxelState
+from sim.search_checks import plan_is_clear
+from sim.vehicle import VehicleLimits
+from tests.planners.conftest import stack_from_state
+
+VOXEL = 0.1
+SHAPE = (80, 40, 25)
+SAFETY = 0.45
+START = np.array([1.5, 2.0, 1.25])
+
+
+def _corridor(known_until_x: float) -> np.ndarray:
+    """A corridor along +x (walls at y = 0, 4 m; floor and ceiling), known up to x."""
+    state = np.zeros(SHAPE, dtype=np.uint8)
+    known = int(known_until_x / VOXEL)
+    state[:known, :, :] = VoxelState.FREE
+    state[:known, 0, :] = state[:known, -1, :] = VoxelState.OCCUPIED
+    state[:known, :, 0] = state[:known, :, -1] = VoxelState.OCCUPIED
+    state[0, :, :] = VoxelState.OCCUPIED
+    return state
+
+
+def _context(seed: int = 0) -> PlannerContext:
+    return PlannerContext(
+        area="corridor", bounds_min=np.zeros(3), bounds_max=np.array(SHAPE) * VOXEL,
+        start=Pose(START.copy(), 0.0), limits=VehicleLimits(), safety_radius_m=SAFETY,
+        camera=CameraConfig(), rng=np.random.default_rng(seed),
+    )
+
+
+def _observe(state: np.ndarray, *, yaw: float = 0.0, velocity: np.ndarray | None = None,
+             outcome: PlanOutcome = PlanOutcome.NONE, position: np.ndarray = START) -> Observation:
+    view = stack_from_state(state, VOXEL, SAFETY).view()
+    return Observation(0.0, Pose(position.copy(), yaw),
+                       np.zeros(3) if velocity is None else velocity, view, outcome)
+
+
+def _assert_flyable(obs: Observation, waypoints: np.ndarray) -> None:
+    view = obs.map
+    assert plan_is_clear(view.traversable, view.free, view.origin, VOXEL, obs.pose.position,
+                         waypoints[:, :3]) == len(waypoints)
+
+
+# -- Rapid --------------------------------------------------------------------------------------
+
+
+def test_rapid_flies_on_toward_the_frontier_ahead() -> None:
+    planner = make("rapid")
+    planner.reset(_context())
+    obs = _observe(_corridor(4.5), velocity=np.array([1.5, 0.0, 0.0]),
+                   outcome=PlanOutcome.FLYING)
+    plan = planner.plan(obs)
+    assert plan.info["mode"] == "direct"
+    assert plan.replan_s == pytest.approx(planner.config.replan_period_s)
+    goal = plan.waypoints[0]
+    assert goal[0] > START[0] + 1.0  # ahead, along the current velocity
+    assert abs(goal[3]) < math.radians(30)
+    _assert_flyable(obs, plan.waypoints)
+
+
+def test_rapid_prefers_the_least_turn() -> None:
+    """Frontiers ahead and to the left; flying left, it keeps going left."""
+    state = _corridor(4.5)
+    state[:, 30:, :] = VoxelState.UNKNOWN  # the corridor's left part is unknown too
+    planner = make("rapid")
+    planner.reset(_context())
+    side = np.array([1.5, 1.0, 1.25])
+    left = planner.plan(_observe(state, yaw=math.pi / 4, velocity=np.array([0.0, 1.2, 0.0]),
+                                 outcome=PlanOutcome.FLYING, position=side))
+    ahead = make("rapid")
+    ahead.reset(_context())
+    straight = ahead.plan(_observe(state, yaw=0.0, velocity=np.array([1.2, 0.0, 0.0]),
+                                   outcome=PlanOutcome.FLYING))
+    assert left.info["mode"] == straight.info["mode"] == "direct"
+    assert left.info["angle_deg"] < 45 and straight.info["angle_deg"] < 45
+    assert left.waypoints[0, 1] > side[1] + 0.9
+    assert straight.waypoints[0, 0] > START[0] + 1.0
+
+
+def test_rapid_keeps_flying_when_nothing_is_in_view_and_falls_back_at_rest() -> None:
+    state = _corridor(4.5)
+    planner = make("rapid")
+    planner.reset(_context())
+    # Looking back at the known end wall: no frontier in view.
+    flying = planner.plan(_observe(state, yaw=math.pi, velocity=np.array([-0.5, 0.0, 0.0]),
+                                   outcome=PlanOutcome.FLYING))
+    assert flying.keep and flying.replan_s == planner.config.replan_period_s
+    at_rest = planner.plan(_observe(state, yaw=math.pi, outcome=PlanOutcome.REACHED))
+    assert at_rest.info["mode"] == "classic"
+    assert at_rest.replan_s == planner.config.replan_period_s
+    _assert_flyable(_observe(state, yaw=math.pi), at_rest.waypoints)
+
+
+# -- NBVP ---------------------------------------------------------------------------------------
+
+
+def test_nbvp_flies_the_first_edge_toward_the_unknown() -> None:
+    planner = make("nbvp")
+    planner.reset(_context())
+    obs = _observe(_corridor(4.5))
+    plan = planner.plan(obs)
+    assert not plan.done and plan.info["mode"] == "local"
+    assert len(plan.waypoints) == 1
+    step = np.linalg.norm(plan.waypoints[0, :3] - START)
+    assert 0 < step <= planner.config.extension_m + 1e-9
+    assert plan.info["best_value"] > planner.config.zero_gain
+    _assert_flyable(obs, plan.waypoints)
+
+
+def test_nbvp_finishes_when_nothing_is_left_to_see() -> None:
+    state = _corridor(8.0)  # everything known
+    planner = make("nbvp", {"max_nodes": 40})
+    planner.reset(_context())
+    plan = planner.plan(_observe(state))
+    assert plan.done
+
+
+def test_branch_values_accumulate_discounted_gains() -> None:
+    obs = _observe(_corridor(4.5))
+    settings = TreeSettings(extension_m=1.0, sampling_radius_m=None, min_nodes=30, max_nodes=30,
+                            max_failures_per_node=1000, degressive_coeff=0.5, zero_gain=1.0,
+                            rewire_radius_m=1.2, yaw="best")
+    gains = GainEvaluator(CameraConfig(), 10.0, VOXEL)
+    grown = grow_tree(obs.map, gains, settings, np.random.default_rng(4), START, 0.0,
+                      np.zeros(3), np.array(SHAPE) * VOXEL)
+    tree = grown.tree
+    assert tree.size == 31
+    for n in range(tree.size):
+        branch = tree.branch(n)
+        expected = np.sum(tree.gains[branch] * np.exp(-0.5 * tree.costs[branch]))
+        assert tree.values[n] == pytest.approx(expected)
+    assert grown.best == int(np.argmax(tree.values[1:])) + 1
+
+
+# -- AEP ----------------------------------------------------------------------------------------
+
+
+def test_aep_goes_back_to_a_cached_view_when_the_local_gain_runs_out() -> None:
+    planner = make("aep")
+    assert isinstance(planner, Aep)
+    planner.reset(_context())
+    state = _corridor(4.5)
+    first = planner.plan(_observe(state))
+    assert first.info["mode"] == "local"
+    assert len(planner._cache) > 0
+    # Far down a long known corridor, out of the local tree's reach, the only unknown is back
+    # where the cache remembers it.
+    long = np.full(SHAPE, VoxelState.FREE, dtype=np.uint8)
+    long[:, 0, :] = long[:, -1, :] = VoxelState.OCCUPIED
+    long[:, :, 0] = long[:, :, -1] = VoxelState.OCCUPIED
+    long[0, :, :] = long[-1, :, :] = VoxelState.OCCUPIED
+    long[3:6, 5:35, 3:22] = VoxelState.UNKNOWN  # some unknown left behind the start
+    far = np.array([7.5, 2.0, 1.25])
+    plan = planner.plan(_observe(long, position=far, outcome=PlanOutcome.REACHED))
+    assert plan.info["mode"] == "global", plan.info
+    assert len(plan.waypoints) >= 1
+    # Back toward the unknown, arriving with the camera turned to it.
+    assert plan.waypoints[-1, 0] < far[0] - 1.0
+    assert math.cos(plan.waypoints[-1, 3]) < 0.0
+    _assert_flyable(_observe(long, position=far), plan.waypoints)
+
+
+def test_aep_finishes_with_nothing_cached_and_nothing_to_see() -> None:
+    planner = make("aep")
+    planner.reset(_context())
+    plan = planner.plan(_observe(_corridor(8.0)))
+    assert plan.done
