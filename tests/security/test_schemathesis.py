@@ -49,19 +49,24 @@ def test_no_server_errors(fuzz_app: tuple[Any, str]) -> None:
     operations = [result.ok() for result in schema.get_all_operations()]
     assert len(operations) >= 15
     for operation in operations:
-        label = f"{operation.method.upper()} {operation.path}"
-
-        @given(case=operation.as_strategy())
-        @settings(max_examples=EXAMPLES_PER_OPERATION, deadline=None, database=None,
-                  suppress_health_check=list(HealthCheck))
-        def call(case: Any, label: str = label) -> None:
-            headers = {"Authorization": f"Bearer {token}"} if len(sent) % 2 == 0 else {}
-            response = case.call(headers=headers)
-            sent.append((label, response.status_code))
-            assert response.status_code < 500, (label, response.text[:500])
-
-        call()
+        _fuzz(operation, token, sent)
     per_operation = {label for label, _ in sent}
     assert len(per_operation) == len(operations)
     assert len(sent) >= 2000, len(sent)
     print(f"{len(sent)} generated requests over {len(operations)} operations, no 5xx")
+
+
+def _fuzz(operation: Any, token: str, sent: list[tuple[str, int]]) -> None:
+    """`EXAMPLES_PER_OPERATION` generated requests to one operation."""
+    label = f"{operation.method.upper()} {operation.path}"
+
+    @given(case=operation.as_strategy())
+    @settings(max_examples=EXAMPLES_PER_OPERATION, deadline=None, database=None,
+              suppress_health_check=list(HealthCheck))
+    def call(case: Any) -> None:
+        headers = {"Authorization": f"Bearer {token}"} if len(sent) % 2 == 0 else {}
+        response = case.call(headers=headers)
+        sent.append((label, response.status_code))
+        assert response.status_code < 500, (label, response.text[:500])
+
+    call()
