@@ -13,6 +13,7 @@ import argparse
 import importlib.util
 import os
 import sys
+import time
 import traceback
 from pathlib import Path
 from typing import IO, Any
@@ -115,11 +116,17 @@ def _serve(reader: IO[bytes], writer: IO[bytes], map_path: str, planner: Any) ->
                 view.frontier  # noqa: B018
                 continue  # no reply: the runner does not wait for syncs
             elif message["op"] == "plan" and stack is not None:
+                started = time.perf_counter()
                 box = message.get("box")
                 if box is not None:
                     stack.occupancy.load(shared, IndexBox(tuple(box[0]), tuple(box[1])))
+                loaded = time.perf_counter()
                 obs = decode_observation(message["obs"], stack.view())
-                reply = {"ok": True, "plan": encode_plan(planner.plan(obs))}
+                plan = planner.plan(obs)
+                done = time.perf_counter()
+                reply = {"ok": True, "plan": encode_plan(plan),
+                         "timing_ms": {"map": 1000 * (loaded - started),
+                                       "plan": 1000 * (done - loaded)}}
             else:
                 reply = {"ok": False, "error": f"unexpected message {message.get('op')!r}"}
         except Exception as exc:

@@ -68,6 +68,8 @@ class SandboxedPlanner:
         self.shared: np.memmap[Any, np.dtype[np.uint8]] | None = None
         self.subscription: DirtyBoxSubscription | None = None
         self.planning_s = 0.0
+        # What the planner process reports of each call: map refresh and planner time, ms.
+        self.timings: list[dict[str, float]] = []
         self._buffer = b""
         # Between plans, a thread sends the map's changes so that the planner process updates
         # its frontiers and clearance while the vehicle flies, as the runner's own trackers do,
@@ -176,6 +178,10 @@ class SandboxedPlanner:
         reply = self._call({"op": "plan", "obs": encode_observation(obs),
                             "box": None if box is None else [list(box.lo), list(box.hi)]},
                            "plan")
+        timing = reply.get("timing_ms")
+        if isinstance(timing, dict):
+            self.timings.append({k: float(v) for k, v in timing.items()
+                                 if isinstance(v, int | float)})
         try:
             return decode_plan(reply.get("plan"))
         except ProtocolError as exc:
