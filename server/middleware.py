@@ -12,11 +12,10 @@ import hashlib
 import json
 import threading
 import time
-from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any
 
-from fastapi import FastAPI, Request, Response
+from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import JSONResponse
 
@@ -62,38 +61,61 @@ class RateLimiter:
             return (1.0 - bucket.tokens) / self.rate
 
 
-def _client_key(request: Request) -> str:
-    auth = request.headers.get("authorization", "")
-    if auth:
-        return "t:" + hashlib.sha256(auth.encode()).hexdigest()[:32]
-    return "a:" + (request.client.host if request.client else "unknown")
+class Protect:
+    """Security headers on every answer, and the rate limits (a plain ASGI middleware: the
+    decorator form costs a task and a stream per request)."""
+
+    def __init__(self, app: Any, settings: Settings) -> None:
+        self.app = app
+        self.settings = settings
+        self.writes = RateLimiter(settings.rate_limit_writes_per_minute,
+                                  settings.rate_limit_burst)
+        self.failures = RateLimiter(settings.rate_limit_auth_failures_per_minute,
+                                    settings.rate_limit_burst)
+
+    async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        client = scope.get("client")
+        host = "a:" + (client[0] if client else "unknown")
+        refused = self._refusal(scope, host)
+        if refused is not None:
+            await refused(scope, receive, send)
+            return
+        failures = self.failures
+
+        async def send_with_headers(message: Any) -> None:
+            if message["type"] == "http.response.start":
+                if message["status"] == 401:
+                    failures.allow(host)
+                present = {k.lower() for k, _ in message.get("headers", [])}
+                extra = [(k.lower().encode(), v.encode()) for k, v in SECURITY_HEADERS.items()
+                         if k.lower().encode() not in present]
+                message = {**message, "headers": [*message.get("headers", []), *extra]}
+            await send(message)
+
+        await self.app(scope, receive, send_with_headers)
+
+    def _refusal(self, scope: Any, host: str) -> JSONResponse | None:
+        # A client that keeps failing to authenticate is slowed down, whatever it sends.
+        bucket = self.failures.buckets.get(host)
+        if bucket is not None and bucket.tokens < 1.0:
+            wait = self.failures.allow(host)
+            if wait > 0:
+                return _too_many(wait, "too many failed authentications")
+        if scope["method"] in MUTATING and self.settings.rate_limit_writes_per_minute > 0:
+            headers = dict(scope.get("headers") or [])
+            auth = headers.get(b"authorization", b"")
+            key = ("t:" + hashlib.sha256(auth).hexdigest()[:32]) if auth else host
+            wait = self.writes.allow(key)
+            if wait > 0:
+                return _too_many(wait, "too many requests that change data")
+        return None
 
 
 def install_middleware(app: FastAPI, settings: Settings) -> None:
-    writes = RateLimiter(settings.rate_limit_writes_per_minute, settings.rate_limit_burst)
-    failures = RateLimiter(settings.rate_limit_auth_failures_per_minute,
-                           settings.rate_limit_burst)
-
-    @app.middleware("http")
-    async def protect(request: Request,
-                      call_next: Callable[[Request], Awaitable[Response]]) -> Response:
-        host = "a:" + (request.client.host if request.client else "unknown")
-        # A client that keeps failing to authenticate is slowed down, whatever it sends.
-        if failures.buckets.get(host) is not None and failures.buckets[host].tokens < 1.0:
-            wait = failures.allow(host)
-            if wait > 0:
-                return _too_many(wait, "too many failed authentications")
-        if request.method in MUTATING and settings.rate_limit_writes_per_minute > 0:
-            wait = writes.allow(_client_key(request))
-            if wait > 0:
-                return _too_many(wait, "too many requests that change data")
-        response = await call_next(request)
-        if response.status_code == 401:
-            failures.allow(host)
-        for name, value in SECURITY_HEADERS.items():
-            response.headers.setdefault(name, value)
-        return response
-
+    app.add_middleware(Protect, settings=settings)
     slack = 256 * 1024  # multipart framing and form fields around the file
     app.add_middleware(
         BodyLimit,
