@@ -1,14 +1,17 @@
 """The receding-horizon next-best-view tree shared by NBVP and AEP.
 
-A random tree grows from the vehicle in traversable space; each new node gets the gain of its
-view (`planners.gain`), at a random yaw (NBVP) or at its best yaw (AEP), and a branch value
+A random tree grows from the vehicle in traversable space, from samples drawn uniformly in a box
+of half-size `sampling_radius_m` around the vehicle (clipped to the area; the whole area when
+None), each edge at most `extension_m` long; each new node gets the gain of its view
+(`planners.gain`), at a random yaw (NBVP) or at its best yaw (AEP), and a branch value
 
     value(n) = value(parent(n)) + gain(n) * exp(-lambda * cost(n)),
 
 cost being the path length from the root (Bircher et al., ICRA 2016, eq. 1). Growth goes on
-until the tree has `min_nodes` nodes and some branch is worth more than `zero_gain`, or gives
-up at `max_nodes` nodes. The previous iteration's best branch, less its flown first edge, seeds
-the new tree so that a good plan is not lost to sampling.
+until the tree has `min_nodes` nodes (N_init) and some branch is worth more than `zero_gain`
+(NBVP: 0, any gain at all), or gives up at `max_nodes` nodes (N_tol). The previous
+iteration's best branch, less its flown first edge, seeds the new tree so that a good plan is
+not lost to sampling.
 """
 
 from __future__ import annotations

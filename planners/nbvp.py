@@ -1,15 +1,18 @@
 """NBVP: receding-horizon next-best-view planning (Bircher et al., ICRA 2016).
 
 At each iteration a random tree grows from the vehicle in known traversable space
-(`planners.nbv_tree`); each node sees the unknown volume of its camera view, discounted by
-exp(-lambda * path cost) and accumulated along its branch. Only the first edge of the best branch
-is flown; the rest of the branch seeds the next tree. Exploration ends when, with `max_nodes`
-nodes, no branch is worth more than `zero_gain`. When the tree cannot grow at all, the vehicle
-goes back to the previous iteration's position, as the original does.
+(`planners.nbv_tree`), sampled in a box around the vehicle, with edges of at most
+`extension_m`; each node sees the unknown volume of its camera view, discounted by
+exp(-lambda * path cost) and accumulated along its branch. The tree grows until it has
+`min_nodes` nodes (N_init) and some node sees unknown volume; only the first edge of the best
+branch is flown, and the rest of the branch seeds the next tree. Exploration ends only when the
+tree reaches `max_nodes` nodes (N_tol) without any gain. When the tree cannot grow at all, the
+vehicle goes back to the previous iteration's position, as the original does.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Literal
 
 import numpy as np
@@ -32,8 +35,12 @@ class NbvpConfig(PlannerConfig):
 
     # nbvp/tree/extension_range: 1.5
     extension_m: float = Field(1.5, gt=0.0, description="RRT extension range, m")
-    # NBVP samples in the whole exploration box.
-    sampling_radius_m: float | None = Field(None, gt=0.0)
+    # Half-size of the sampling box around the vehicle (clipped to the area), m; None samples
+    # the whole area. Our choice: the gain range (nbvp/gain/range, 5 m), beyond which a node's
+    # gain is discounted by exp(-0.5 x 5) < 0.1 anyway. The public NBVP samples a ball around
+    # the vehicle as wide as the exploration box's diagonal, i.e. the whole box; in MAZE's
+    # corridors few such samples pull the tree through a doorway (docs/planners.md).
+    sampling_radius_m: float | None = Field(5.0, gt=0.0)
     # nbvp/tree/initial_iterations: 15
     min_nodes: int = Field(15, ge=1)
     # nbvp/tree/cuttoff_iterations: 400
@@ -42,8 +49,11 @@ class NbvpConfig(PlannerConfig):
     max_failures_per_node: int = Field(1000, ge=1)
     # nbvp/gain/degressive_coeff: 0.5
     degressive_coeff: float = Field(0.5, ge=0.0, description="lambda, 1/m")
-    # nbvp/gain/zero: 1 (the original's gain is an unknown volume in m³)
-    zero_gain: float = Field(1.0, ge=0.0, description="m³")
+    # What the best branch must be worth, m³, for gain to be found. The original starts the
+    # root's value at nbvp/gain/zero (1 in the authors' maze.yaml) and finds gain when a branch
+    # is worth more than that, i.e. when any node sees any unknown volume: 0 here, whatever
+    # nbvp/gain/zero is. (AEP sets its own threshold.)
+    zero_gain: float = Field(0.0, ge=0.0, description="m³")
     # nbvp/gain/range: 5.0 (the camera's range)
     gain_range_m: float | None = Field(5.0, gt=0.0)
     # NBVP samples a random yaw per node.
@@ -105,10 +115,36 @@ class Nbvp(Planner):
                          ctx.bounds_min, ctx.bounds_max, self._seed)
 
     def no_local_gain(self, obs: Observation, outcome: TreeOutcome) -> Plan:
-        """What to do when no branch is worth `zero_gain`: NBVP stops."""
-        plan = Plan.finished(f"no branch gains more than {self.config.zero_gain} m³")
+        """What to do when no branch is worth `zero_gain`: NBVP stops, but only once a tree
+        sampled in the whole area, as the original samples, finds no gain either (a box around
+        the vehicle misses unknown space beyond it, e.g. at the end of an explored dead end)."""
+        if self.config.sampling_radius_m is not None:
+            wide, outcome = self._grow_wide(obs, outcome)
+            if wide is not None:
+                return wide
+        plan = Plan.finished(f"no branch gains more than {self.config.zero_gain} m³ in "
+                             f"{outcome.tree.size - 1} nodes")
         plan.info.update(nodes=int(outcome.tree.size), stalled=str(outcome.stalled))
         return plan
+
+    def _grow_wide(self, obs: Observation,
+                   local: TreeOutcome) -> tuple[Plan | None, TreeOutcome]:
+        """The first edge of a tree sampled in the whole area (None if it finds no gain either),
+        and that tree (the local one if none could be grown)."""
+        root, snapped = self._root(obs)
+        if root is None:
+            return None, local
+        ctx = self.context
+        settings = replace(self.config.tree_settings(), sampling_radius_m=None)
+        outcome = grow_tree(obs.map, self.gain_evaluator(obs.map.voxel_size), settings, ctx.rng,
+                            root, obs.pose.yaw, ctx.bounds_min, ctx.bounds_max)
+        if outcome.best < 0 or not outcome.gain_found:
+            return None, outcome
+        if self._previous:
+            self._previous.pop()  # `plan` recorded this position; `_first_edge` records it again
+        plan = self._first_edge(outcome, snapped, obs)
+        plan.info["mode"] = "wide"
+        return plan, outcome
 
     def _root(self, obs: Observation) -> tuple[FloatArray | None, bool]:
         """The tree's root: the vehicle's position, or the nearest traversable voxel centre if

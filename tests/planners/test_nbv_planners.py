@@ -10,6 +10,7 @@ import pytest
 from planners.aep import Aep
 from planners.gain import GainEvaluator
 from planners.nbv_tree import TreeSettings, grow_tree
+from planners.nbvp import NbvpConfig
 from planners.registry import make
 from sim.camera import CameraConfig
 from sim.geometry import Pose
@@ -129,6 +130,48 @@ def test_nbvp_finishes_when_nothing_is_left_to_see() -> None:
     planner.reset(_context())
     plan = planner.plan(_observe(state))
     assert plan.done
+
+
+def test_nbvp_keeps_exploring_while_any_node_sees_unknown() -> None:
+    """The original's rule: gain is found as soon as a branch beats the root, however little."""
+    state = _corridor(8.0)
+    state[30:33, 19:22, 11:14] = VoxelState.UNKNOWN  # a 0.027 m³ pocket ahead of the vehicle
+    planner = make("nbvp")
+    planner.reset(_context())
+    obs = _observe(state)
+    plan = planner.plan(obs)
+    assert not plan.done, plan.info
+    assert plan.info["mode"] == "local"
+    assert 0.0 < plan.info["best_value"] < 0.1
+    _assert_flyable(obs, plan.waypoints)
+
+
+def test_nbvp_tree_samples_a_box_around_the_vehicle() -> None:
+    """Every node lies in the sampling box around the root; every edge is at most one
+    extension range long."""
+    settings = NbvpConfig(sampling_radius_m=1.0, min_nodes=40, max_nodes=40).tree_settings()
+    obs = _observe(_corridor(8.0))  # all known: no gain, so the tree grows to max_nodes
+    grown = grow_tree(obs.map, GainEvaluator(CameraConfig(), 10.0, VOXEL), settings,
+                      np.random.default_rng(3), START, 0.0, np.zeros(3),
+                      np.array(SHAPE) * VOXEL)
+    tree = grown.tree
+    assert tree.size == 41 and not grown.gain_found
+    assert np.all(np.abs(tree.positions - START) <= 1.0 + 1e-9)
+    edges = np.linalg.norm(tree.positions[1:] - tree.positions[tree.parents[1:]], axis=1)
+    assert np.all(edges <= settings.extension_m + 1e-9)
+
+
+def test_nbvp_samples_the_whole_area_before_finishing() -> None:
+    """Unknown beyond the gain range of every node of the box: the whole-area tree finds it."""
+    state = _corridor(8.0)
+    state[72:75, 19:22, 11:14] = VoxelState.UNKNOWN  # 5.7 m ahead, out of the box's reach
+    planner = make("nbvp", {"sampling_radius_m": 0.3, "max_nodes": 60})
+    planner.reset(_context())
+    obs = _observe(state)
+    plan = planner.plan(obs)
+    assert not plan.done, plan.info
+    assert plan.info["mode"] == "wide"
+    _assert_flyable(obs, plan.waypoints)
 
 
 def test_branch_values_accumulate_discounted_gains() -> None:
