@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import threading
 from collections import OrderedDict
 from collections.abc import Callable
@@ -9,6 +10,8 @@ from concurrent.futures import Future, ThreadPoolExecutor
 
 from web.replay.extras import Extras, compute_extras
 from web.replay.source import RunData
+
+log = logging.getLogger(__name__)
 
 # A loaded 1800 s run holds its recording and map checkpoints: tens of MB. A few stay loaded.
 DEFAULT_CAPACITY = 4
@@ -41,7 +44,7 @@ class RunCache:
             run = self._loader(key)
             with self._lock:
                 self._runs[key] = run
-                self._extras[key] = self._pool.submit(compute_extras, run)
+                self._extras[key] = self._submit(run)
                 while len(self._runs) > self._capacity:
                     old, _ = self._runs.popitem(last=False)
                     self._extras.pop(old, None)
@@ -52,8 +55,19 @@ class RunCache:
         with self._lock:
             future = self._extras.get(run.key)
             if future is None:  # evicted meanwhile: compute again for this tab
-                future = self._extras[run.key] = self._pool.submit(compute_extras, run)
+                future = self._extras[run.key] = self._submit(run)
             return future
+
+    def _submit(self, run: RunData) -> Future[Extras]:
+        future = self._pool.submit(compute_extras, run)
+
+        def report(done: Future[Extras]) -> None:
+            if not done.cancelled() and done.exception() is not None:
+                # Tabs simply go without the truth cloud and the final mesh.
+                log.error("background work for %s failed: %s", run.key, done.exception())
+
+        future.add_done_callback(report)
+        return future
 
     def close(self) -> None:
         self._pool.shutdown(wait=False, cancel_futures=True)

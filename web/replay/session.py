@@ -199,6 +199,11 @@ class ClientSession:
             self.client.add_notification("Cannot replay", str(exc), color="red",
                                          auto_close_seconds=10.0)
             return None
+        except Exception as exc:  # a database or store failure: this tab carries on
+            log.exception("loading %s failed", key)
+            self.client.add_notification("Cannot replay", f"{key}: {exc}", color="red",
+                                         auto_close_seconds=10.0)
+            return None
         finally:
             note.remove()
 
@@ -278,7 +283,8 @@ class ClientSession:
         with self.gui["plot_folder"]:
             self.gui["plot"] = self.client.gui.add_uplot(
                 tuple(np.asarray(d, dtype=np.float64) for d in data), tuple(series),
-                title="explored volume", aspect=1.6)
+                scales={"x": {"time": False}},  # seconds, not dates
+                axes=({"label": "t (s)"}, {"label": "m³"}), aspect=1.6)
 
     # -- the GUI -------------------------------------------------------------------------------
     def _build_gui(self) -> None:
@@ -287,9 +293,13 @@ class ClientSession:
         # Shadow maps render the scene several more times per frame: too slow for the large
         # point clouds on a laptop, let alone software WebGL, and they add nothing here.
         self.client.scene.configure_default_lights(enabled=True, cast_shadow=False)
+        # The default image-based lighting (an HDR environment map) is prefiltered in the
+        # browser at start: 5-9 s in software WebGL, before anything is drawn. The default
+        # lights alone light the flat-shaded meshes well enough.
+        self.client.scene.configure_environment_map(None)
         with gui.add_folder("Timeline"):
             slider = gui.add_slider("t (s)", min=0.0, max=1.0, step=0.1, initial_value=0.0)
-            slider.on_update(lambda _e: self._on_slider())
+            slider.on_update(self._on_slider)
             self.gui["time"] = slider
             buttons = gui.add_button_group("Playback", ("Play", "Pause"))
             buttons.on_click(lambda e: self.post("play" if e.target.value == "Play" else "pause"))
@@ -350,9 +360,12 @@ class ClientSession:
             self.client.add_notification("Cannot open", str(exc), color="red",
                                          auto_close_seconds=8.0)
 
-    def _on_slider(self) -> None:
-        value = float(self.gui["time"].value)
-        # Playback sets the slider too; only a move by the user stops it.
-        if abs(value - round(self.clock.time, 1)) > 1e-6:
-            self.post("pause")
-            self.post("time", value)
+    def _on_slider(self, event: Any) -> None:
+        if event.client is None:  # set by playback (viser calls back for those too)
+            return
+        slider = self.gui["time"]
+        value = float(slider.value)
+        if self.primary is not None and value >= float(slider.max) - 1e-9:
+            value = self.primary.run.duration  # the slider's last step is the end of the run
+        self.post("pause")
+        self.post("time", value)

@@ -19,6 +19,9 @@ UNKNOWN, FREE, OCCUPIED = 0, 1, 2
 # A checkpoint of the MAZE grid (200 x 200 x 25) is 1 MB; one every 30 keyframes (60 s at the
 # default 2 s keyframe interval) keeps a 1800 s run at 30 MB and bounds a lookup to 30 deltas.
 DEFAULT_CHECKPOINT_EVERY = 30
+# Larger grids get sparser checkpoints so that one run's stay within this many bytes; the deltas
+# in between are small (only changed voxels), so lookups stay fast.
+CHECKPOINT_BUDGET_BYTES = 64 << 20
 
 
 @dataclass(frozen=True)
@@ -59,8 +62,7 @@ def frontier_mask(state: npt.NDArray[np.uint8]) -> npt.NDArray[np.bool_]:
 class MapTimeline:
     """The recording's occupancy map at every keyframe, with checkpoints for quick access."""
 
-    def __init__(self, recording: Recording,
-                 checkpoint_every: int = DEFAULT_CHECKPOINT_EVERY) -> None:
+    def __init__(self, recording: Recording, checkpoint_every: int | None = None) -> None:
         header = recording.header
         nx, ny, nz = (int(n) for n in header["grid_shape"])
         self.shape: tuple[int, int, int] = (nx, ny, nz)
@@ -71,6 +73,10 @@ class MapTimeline:
         self._offsets = np.asarray(recording.array("keyframe_offsets"), dtype=np.int64)
         self._indices = np.asarray(recording.array("keyframe_indices"), dtype=np.int64)
         self._states = np.asarray(recording.array("keyframe_states"), dtype=np.uint8)
+        if checkpoint_every is None:
+            voxels = nx * ny * nz
+            needed = -(-len(self.times) * voxels // CHECKPOINT_BUDGET_BYTES)
+            checkpoint_every = max(DEFAULT_CHECKPOINT_EVERY, needed)
         self.checkpoint_every = max(1, int(checkpoint_every))
         self._checkpoints: dict[int, npt.NDArray[np.uint8]] = {}
         self.known_counts = self._replay()
