@@ -213,8 +213,10 @@ def _serve(args: argparse.Namespace) -> None:
               f"data in {settings.resolved_data_dir}"
               + (f"; 3D replay at {viewer.url}" if viewer is not None else "") + ")",
               flush=True)
+        # Keep-alive longer than uvicorn's 5 s: under load a client may send on a connection
+        # the server is just closing as idle, and see it reset.
         uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level="info",
-                    limit_concurrency=MAX_CONCURRENT_REQUESTS)
+                    limit_concurrency=MAX_CONCURRENT_REQUESTS, timeout_keep_alive=30)
     finally:
         if viewer is not None:
             viewer.stop()

@@ -21,31 +21,40 @@ ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 
 
 async def _client(base: str, job_id: int, until: float, latencies: list[float],
-                  errors: list[str], http: httpx.AsyncClient, index: int) -> None:
+                  errors: list[str], retries: list[str], http: httpx.AsyncClient,
+                  index: int) -> None:
     paths = [f"/api/v1/jobs/{job_id}", "/api/v1/leaderboard"]
     i = index
     while time.monotonic() < until:
         path = paths[i % 2]
         i += 1
         started = time.monotonic()
-        try:
-            answer = await http.get(base + path)
-            if answer.status_code != 200:
-                errors.append(f"{path}: {answer.status_code}")
-        except httpx.HTTPError as exc:
-            errors.append(f"{path}: {type(exc).__name__}")
+        for attempt in (1, 2):
+            try:
+                answer = await http.get(base + path)
+                if answer.status_code != 200:
+                    errors.append(f"{path}: {answer.status_code}")
+                break
+            except httpx.TransportError as exc:
+                # A reused keep-alive connection that the server closed at that moment is
+                # retried once, as HTTP clients do for idempotent requests; counted apart.
+                if attempt == 2:
+                    errors.append(f"{path}: {type(exc).__name__}")
+                else:
+                    retries.append(path)
         latencies.append(time.monotonic() - started)
 
 
-async def _load(base: str, job_id: int) -> tuple[list[float], list[str]]:
+async def _load(base: str, job_id: int) -> tuple[list[float], list[str], list[str]]:
     latencies: list[float] = []
     errors: list[str] = []
+    retries: list[str] = []
     limits = httpx.Limits(max_connections=CLIENTS, max_keepalive_connections=CLIENTS)
     async with httpx.AsyncClient(limits=limits, timeout=30.0) as http:
         until = time.monotonic() + SECONDS
-        await asyncio.gather(*(_client(base, job_id, until, latencies, errors, http, i)
+        await asyncio.gather(*(_client(base, job_id, until, latencies, errors, retries, http, i)
                                for i in range(CLIENTS)))
-    return latencies, errors
+    return latencies, errors, retries
 
 
 def test_two_hundred_clients_for_a_minute(tmp_path: Path) -> None:
@@ -75,7 +84,7 @@ def test_two_hundred_clients_for_a_minute(tmp_path: Path) -> None:
         job = httpx.post(f"{base}/api/v1/jobs", headers={"Authorization": f"Bearer {token}"},
                          json={"planner": "classic", "areas": ["maze"], "runs": 2,
                                "seconds": 700}).json()
-        latencies, errors = asyncio.run(_load(base, job["id"]))
+        latencies, errors, retries = asyncio.run(_load(base, job["id"]))
         progress = httpx.get(f"{base}/api/v1/jobs/{job['id']}").json()
     finally:
         server.terminate()
@@ -86,7 +95,8 @@ def test_two_hundred_clients_for_a_minute(tmp_path: Path) -> None:
         return 1000.0 * ordered[min(len(ordered) - 1, int(p * len(ordered)))]
 
     report = {"clients": CLIENTS, "seconds": SECONDS, "requests": len(latencies),
-              "errors": len(errors), "throughput_rps": len(latencies) / SECONDS,
+              "errors": len(errors), "retried_connections": len(retries),
+              "throughput_rps": len(latencies) / SECONDS,
               "p50_ms": pct(0.50), "p95_ms": pct(0.95), "p99_ms": pct(0.99),
               "job_progress_at_end": progress["progress"]}
     ARTIFACTS.mkdir(exist_ok=True)
