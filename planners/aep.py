@@ -42,6 +42,8 @@ class AepConfig(NbvpConfig):
     degressive_coeff: float = Field(0.75, ge=0.0)
     # aep/gain/zero: 1
     zero_gain: float = Field(1.0, ge=0.0)
+    # AEP's own global step (cached nodes, then A*) replaces NBVP's whole-area tree.
+    wide_below_gain_m3: float | None = None
     # aep/gain/r_max: 5
     gain_range_m: float | None = Field(5.0, gt=0.0)
     # AEP picks the best yaw of each node.

@@ -7,7 +7,9 @@ exp(-lambda * path cost) and accumulated along its branch. The tree grows until 
 `min_nodes` nodes (N_init) and some node sees unknown volume; only the first edge of the best
 branch is flown, and the rest of the branch seeds the next tree. Exploration ends only when the
 tree reaches `max_nodes` nodes (N_tol) without any gain. When the tree cannot grow at all, the
-vehicle goes back to the previous iteration's position, as the original does.
+vehicle goes back to the previous iteration's position, as the original does. When the best local
+branch is worth less than `wide_below_gain_m3`, a tree sampled in the whole area is grown too,
+and the vehicle follows whichever best branch is worth more.
 """
 
 from __future__ import annotations
@@ -62,6 +64,14 @@ class NbvpConfig(PlannerConfig):
     rewire_radius_m: float | None = Field(None, gt=0.0)
     # Our choice: 5° rays resolve a 0.2 m voxel at 2.3 m; the original visits every voxel.
     ray_step_deg: float = Field(5.0, gt=0.0, le=30.0)
+    # When the best local branch is worth less than this, m³, a tree sampled in the whole area
+    # is grown as well (until a branch is worth this much, or `max_nodes`), and the better of
+    # the two best branches is flown; None: only when no local gain is found at all. Our choice:
+    # on MAZE the vehicle stuck in the explored part of the maze followed branches worth
+    # 0.0002-0.08 m³ (partly seen pockets inside the sampling box) while the unexplored part lay
+    # beyond the box; 0.1 m³ is just above those. Only used with a sampling box, and inert
+    # when at most `zero_gain` (AEP's 1 m³): a branch found to gain is then worth more.
+    wide_below_gain_m3: float | None = Field(0.1, gt=0.0)
 
     def tree_settings(self) -> TreeSettings:
         return TreeSettings(
@@ -97,6 +107,10 @@ class Nbvp(Planner):
             return Plan.finished("the vehicle is not in traversable space")
         outcome = self.grow(obs, root)
         if outcome.best >= 0 and outcome.gain_found:
+            wide = self._wide_if_better(obs, root, outcome)
+            if wide is not None:
+                return self._first_edge(wide, snapped, obs, mode="wide",
+                                        local_value=outcome.best_value)
             return self._first_edge(outcome, snapped, obs)
         self._seed = None
         if outcome.stalled:
@@ -113,6 +127,24 @@ class Nbvp(Planner):
         return grow_tree(obs.map, self.gain_evaluator(obs.map.voxel_size),
                          self.config.tree_settings(), ctx.rng, root, obs.pose.yaw,
                          ctx.bounds_min, ctx.bounds_max, self._seed)
+
+    def _wide_if_better(self, obs: Observation, root: FloatArray,
+                        local: TreeOutcome) -> TreeOutcome | None:
+        """A tree sampled in the whole area, if the best local branch is worth less than
+        `wide_below_gain_m3` and that tree's best branch is worth more (None otherwise). The
+        tree grows until a branch is worth `wide_below_gain_m3`, or up to `max_nodes`."""
+        cfg = self.config
+        threshold = cfg.wide_below_gain_m3
+        if threshold is None or cfg.sampling_radius_m is None or local.best_value >= threshold:
+            return None
+        ctx = self.context
+        settings = replace(cfg.tree_settings(), sampling_radius_m=None,
+                           zero_gain=max(cfg.zero_gain, threshold))
+        wide = grow_tree(obs.map, self.gain_evaluator(obs.map.voxel_size), settings, ctx.rng,
+                         root, obs.pose.yaw, ctx.bounds_min, ctx.bounds_max)
+        if wide.best < 0 or wide.best_value <= local.best_value:
+            return None
+        return wide
 
     def no_local_gain(self, obs: Observation, outcome: TreeOutcome) -> Plan:
         """What to do when no branch is worth `zero_gain`: NBVP stops, but only once a tree
@@ -159,7 +191,8 @@ class Nbvp(Planner):
             return here.copy(), False
         return view.index_to_world(start[None])[0], True
 
-    def _first_edge(self, outcome: TreeOutcome, snapped: bool, obs: Observation) -> Plan:
+    def _first_edge(self, outcome: TreeOutcome, snapped: bool, obs: Observation,
+                    mode: str = "local", local_value: float | None = None) -> Plan:
         tree = outcome.tree
         branch = tree.branch(outcome.best)
         nodes = np.column_stack([tree.positions[branch], tree.yaws[branch]])
@@ -169,10 +202,13 @@ class Nbvp(Planner):
         if snapped:
             first = np.array([[*tree.positions[0], waypoints[0, 3]]])
             waypoints = np.vstack([first, waypoints])
-        return Plan(waypoints, info={
-            "mode": "local", "nodes": int(tree.size), "best_value": outcome.best_value,
+        plan = Plan(waypoints, info={
+            "mode": mode, "nodes": int(tree.size), "best_value": outcome.best_value,
             "best_gain": float(tree.gains[outcome.best]),
         })
+        if local_value is not None:
+            plan.info["local_value"] = local_value
+        return plan
 
     def _path_to(self, obs: Observation, target: FloatArray,
                  yaw: float | None = None) -> FloatArray | None:

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from planners.aep import Aep
+from planners.aep import Aep, AepConfig
 from planners.gain import GainEvaluator
 from planners.nbv_tree import TreeSettings, grow_tree
 from planners.nbvp import NbvpConfig
@@ -141,7 +141,8 @@ def test_nbvp_keeps_exploring_while_any_node_sees_unknown() -> None:
     obs = _observe(state)
     plan = planner.plan(obs)
     assert not plan.done, plan.info
-    assert plan.info["mode"] == "local"
+    # Worth less than `wide_below_gain_m3`: a whole-area tree is grown too, and may win.
+    assert plan.info["mode"] in ("local", "wide")
     assert 0.0 < plan.info["best_value"] < 0.1
     _assert_flyable(obs, plan.waypoints)
 
@@ -172,6 +173,35 @@ def test_nbvp_samples_the_whole_area_before_finishing() -> None:
     assert not plan.done, plan.info
     assert plan.info["mode"] == "wide"
     _assert_flyable(obs, plan.waypoints)
+
+
+def test_nbvp_grows_the_whole_area_tree_when_the_local_gain_is_tiny() -> None:
+    """A tiny pocket inside the box, a large unknown region beyond it: the whole-area tree's
+    best branch is worth more than the local one's, and the vehicle follows it."""
+    state = _corridor(8.0)
+    state[20:22, 28:30, 11:13] = VoxelState.UNKNOWN  # 0.008 m³ beside the vehicle
+    state[50:79, 1:39, 1:24] = VoxelState.UNKNOWN  # 2.9 x 3.8 x 2.3 m from x = 5 m
+    # Nodes within 1 m of the vehicle see 2 m: up to x = 4.5 m, short of the large region.
+    config = {"sampling_radius_m": 1.0, "gain_range_m": 2.0}
+    local_only = make("nbvp", {**config, "wide_below_gain_m3": None})
+    local_only.reset(_context())
+    obs = _observe(state)
+    local = local_only.plan(obs)
+    assert local.info["mode"] == "local"
+    assert 0.0 < local.info["best_value"] < 0.1
+    planner = make("nbvp", config)
+    planner.reset(_context())
+    plan = planner.plan(obs)
+    assert plan.info["mode"] == "wide", plan.info
+    assert plan.info["local_value"] < 0.1 < plan.info["best_value"]
+    assert plan.waypoints[0, 0] > START[0]  # toward the unknown region
+    _assert_flyable(obs, plan.waypoints)
+
+
+def test_aep_never_grows_the_whole_area_tree_beside_a_local_gain() -> None:
+    """AEP finds local gain only above its `zero_gain`, so the fallback never applies."""
+    config = AepConfig()
+    assert config.wide_below_gain_m3 is None or config.wide_below_gain_m3 <= config.zero_gain
 
 
 def test_branch_values_accumulate_discounted_gains() -> None:
