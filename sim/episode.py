@@ -470,11 +470,15 @@ class _EpisodeRunner:
             estimate = self.drift.estimate(true_pose)
             t1 = time.perf_counter()
             costs.render += t1 - t0
-            if fuse_occ:
+            if fuse_occ or fuse_tsdf:
                 s = cfg.occupancy_pixel_stride
                 occ_depth = depth[::s, ::s] if stride == 1 and s > 1 else depth
                 ends, hit = self.camera.back_project(occ_depth, estimate, s)
-                self.mapping.occupancy.integrate(estimate.position, ends, hit)
+                if fuse_occ:
+                    self.mapping.occupancy.integrate(estimate.position, ends, hit)
+                if fuse_tsdf:
+                    # The surface layers count the frames the TSDF fuses (`sim/surface.py`).
+                    self.mapping.surface.observe(estimate.position, ends[hit])
             t2 = time.perf_counter()
             costs.occupancy += t2 - t1
             if fuse_tsdf:

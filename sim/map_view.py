@@ -1,6 +1,8 @@
-"""The map as planners see it: read-only occupancy, frontiers and traversability.
+"""The map as planners see it: read-only occupancy, frontiers, traversability and how well each
+surface voxel has been measured.
 
-`MappingStack` owns the occupancy map and the trackers that follow it; `MapView` is the read-only
+`MappingStack` owns the occupancy map, the surface observation layers and the trackers that
+follow the map; `MapView` is the read-only
 face handed to planners. Trackers are refreshed lazily, when a planner first asks.
 """
 
@@ -14,6 +16,7 @@ import numpy.typing as npt
 from sim.clearance import TraversabilityTracker
 from sim.frontiers import FrontierCluster, FrontierTracker
 from sim.occupancy import OccupancyConfig, OccupancyMap, VoxelState
+from sim.surface import SurfaceObservations
 
 __all__ = ["FrontierCluster", "MapView", "MappingStack"]
 
@@ -21,7 +24,8 @@ BoolGrid = npt.NDArray[np.bool_]
 
 
 class MappingStack:
-    """An occupancy map and the frontier and traversability trackers that follow it."""
+    """An occupancy map, its surface observation layers, and the frontier and traversability
+    trackers that follow it."""
 
     def __init__(
         self,
@@ -32,6 +36,7 @@ class MappingStack:
         config: OccupancyConfig | None = None,
     ) -> None:
         self.occupancy = OccupancyMap(origin, shape, voxel_size, config or OccupancyConfig())
+        self.surface = SurfaceObservations(self.occupancy)
         self.frontiers = FrontierTracker(self.occupancy)
         self.traversability = TraversabilityTracker(self.occupancy, safety_radius_m)
 
@@ -80,6 +85,23 @@ class MapView:
         """(nx, ny, nz) True on frontier voxels (free, next to unknown)."""
         self._stack.frontiers.update()
         return self._stack.frontiers.frontier
+
+    @property
+    def surface_weight(self) -> npt.NDArray[np.uint8]:
+        """(nx, ny, nz) uint8: TSDF-fused depth frames with a return in the voxel (the surface's
+        TSDF weight), saturating at 255 (`sim/surface.py`)."""
+        return self._stack.surface.weight
+
+    @property
+    def surface_directions(self) -> npt.NDArray[np.uint8]:
+        """(nx, ny, nz) uint8 bit mask: bit b set when the surface in the voxel was seen from
+        horizontal sector b (45 degrees each, from +x counter-clockwise, voxel to camera)."""
+        return self._stack.surface.directions
+
+    @property
+    def surface_observations(self) -> SurfaceObservations:
+        """The underlying surface layers, for framework code that follows their changes."""
+        return self._stack.surface
 
     @property
     def occupancy_map(self) -> OccupancyMap:

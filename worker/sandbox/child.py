@@ -77,10 +77,21 @@ def _load_planner(args: argparse.Namespace) -> Any:
     return classes[0]()
 
 
+def _load(stack: Any, shared: Any, message: dict[str, Any]) -> None:
+    """Copy the boxes the runner reports changed from the shared layers into the mirror."""
+    from sim.occupancy import IndexBox
+
+    box = message.get("box")
+    if box is not None:
+        stack.occupancy.load(shared[0], IndexBox(tuple(box[0]), tuple(box[1])))
+    surface = message.get("surface_box")
+    if surface is not None:
+        stack.surface.load(shared[1], shared[2], IndexBox(tuple(surface[0]), tuple(surface[1])))
+
+
 def _serve(reader: IO[bytes], writer: IO[bytes], map_path: str, planner: Any) -> None:
     import numpy as np
 
-    from sim.occupancy import IndexBox
     from worker.sandbox.mirror import MirrorStack
     from worker.sandbox.protocol import (
         MAX_MESSAGE_BYTES,
@@ -103,23 +114,20 @@ def _serve(reader: IO[bytes], writer: IO[bytes], map_path: str, planner: Any) ->
                 grid = message["grid"]
                 nx, ny, nz = (int(n) for n in grid["shape"])
                 shape = (nx, ny, nz)
-                shared = np.memmap(map_path, dtype=np.uint8, mode="r", shape=shape)
+                shared = np.memmap(map_path, dtype=np.uint8, mode="r", shape=(3, *shape))
                 stack = MirrorStack(grid["origin"], shape, float(grid["voxel_size"]),
                                     float(message["ctx"]["safety_radius_m"]))
                 planner.reset(decode_context(message["ctx"]))
                 reply: dict[str, Any] = {"ok": True}
             elif message["op"] == "sync" and stack is not None:
-                box = message["box"]
-                stack.occupancy.load(shared, IndexBox(tuple(box[0]), tuple(box[1])))
+                _load(stack, shared, message)
                 view = stack.view()
                 view.traversable  # noqa: B018 - bring the trackers up to date now
                 view.frontier  # noqa: B018
                 continue  # no reply: the runner does not wait for syncs
             elif message["op"] == "plan" and stack is not None:
                 started = time.perf_counter()
-                box = message.get("box")
-                if box is not None:
-                    stack.occupancy.load(shared, IndexBox(tuple(box[0]), tuple(box[1])))
+                _load(stack, shared, message)
                 loaded = time.perf_counter()
                 obs = decode_observation(message["obs"], stack.view())
                 plan = planner.plan(obs)

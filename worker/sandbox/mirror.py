@@ -1,8 +1,9 @@
 """The planner process's copy of the map, refreshed from shared memory before each call.
 
-The runner writes the occupancy states into a shared, read-only (for the planner) memory map and
-sends the box that changed; the mirror copies that box and tells its frontier and
-traversability trackers, which then update only there, as they do in the runner.
+The runner writes the occupancy states and the surface observation layers into a shared,
+read-only (for the planner) memory map and sends the boxes that changed; the mirror copies those
+boxes and tells its frontier and traversability trackers, which then update only there, as they
+do in the runner.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from sim.clearance import TraversabilityTracker
 from sim.frontiers import FrontierTracker
 from sim.map_view import MapView
 from sim.occupancy import IndexBox, OccupancyMap, VoxelState
+from sim.surface import SurfaceObservations
 
 
 class MirrorMap(OccupancyMap):
@@ -36,6 +38,7 @@ class MirrorStack:
     def __init__(self, origin: npt.ArrayLike, shape: tuple[int, int, int], voxel_size: float,
                  safety_radius_m: float) -> None:
         self.occupancy = MirrorMap(origin, shape, voxel_size)
+        self.surface = SurfaceObservations(self.occupancy)
         self.frontiers = FrontierTracker(self.occupancy)
         self.traversability = TraversabilityTracker(self.occupancy, safety_radius_m)
 

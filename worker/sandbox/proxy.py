@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from sim.interface import Observation, Plan, PlannerContext
+from sim.map_view import MapView
 from sim.occupancy import DirtyBoxSubscription, IndexBox
 from worker.sandbox import isolation
 from worker.sandbox.isolation import SandboxLimits
@@ -67,6 +68,7 @@ class SandboxedPlanner:
         self.cgroups: isolation.Cgroups | None = None
         self.shared: np.memmap[Any, np.dtype[np.uint8]] | None = None
         self.subscription: DirtyBoxSubscription | None = None
+        self.surface_subscription: DirtyBoxSubscription | None = None
         self.planning_s = 0.0
         # What the planner process reports of each call: map refresh and planner time, ms.
         self.timings: list[dict[str, float]] = []
@@ -158,25 +160,30 @@ class SandboxedPlanner:
         if self._pending_reset:
             shape = (int(view.shape[0]), int(view.shape[1]), int(view.shape[2]))
             map_file = self.shm_dir / "map.u8"
-            self.shared = np.memmap(map_file, dtype=np.uint8, mode="w+", shape=shape)
+            # Three layers: the states, the surface weights and the surface directions.
+            self.shared = np.memmap(map_file, dtype=np.uint8, mode="w+", shape=(3, *shape))
             os.chmod(map_file, 0o644)
             self.subscription = view.occupancy_map.subscribe()
+            self.surface_subscription = view.surface_observations.subscribe()
             box: IndexBox | None = IndexBox.full(shape)
+            surface_box: IndexBox | None = box
         else:
             with self._lock:
-                box = self._copy_changes(view.state)
+                box, surface_box = self._copy_changes(view)
         assert self.shared is not None
         if self._pending_reset:
-            self.shared[:] = view.state
+            self.shared[0] = view.state
+            self.shared[1] = view.surface_weight
+            self.shared[2] = view.surface_directions
             self._call({"op": "reset", "ctx": encode_context(self._ctx),
                         "grid": {"shape": list(view.shape), "origin": view.origin.tolist(),
                                  "voxel_size": view.voxel_size}}, "reset")
             self._pending_reset = False
-            self._sync_thread = threading.Thread(target=self._sync_loop, args=(view.state,),
+            self._sync_thread = threading.Thread(target=self._sync_loop, args=(view,),
                                                  name="sandbox-map-sync", daemon=True)
             self._sync_thread.start()
         reply = self._call({"op": "plan", "obs": encode_observation(obs),
-                            "box": None if box is None else [list(box.lo), list(box.hi)]},
+                            "box": _box_message(box), "surface_box": _box_message(surface_box)},
                            "plan")
         timing = reply.get("timing_ms")
         if isinstance(timing, dict):
@@ -187,25 +194,32 @@ class SandboxedPlanner:
         except ProtocolError as exc:
             raise SandboxError(f"the planner returned an invalid plan: {exc}") from None
 
-    def _copy_changes(self, state: Any) -> IndexBox | None:
-        """Copy the voxels changed since the last copy into shared memory (hold the lock)."""
+    def _copy_changes(self, view: MapView) -> tuple[IndexBox | None, IndexBox | None]:
+        """Copy the voxels changed since the last copy into shared memory (hold the lock):
+        the states' box and the surface layers' box."""
         box = self.subscription.take() if self.subscription is not None else None
-        if box is not None and self.shared is not None:
-            region = box.slices()
-            self.shared[region] = state[region]
-        return box
+        surface = (self.surface_subscription.take() if self.surface_subscription is not None
+                   else None)
+        if self.shared is not None:
+            if box is not None:
+                self.shared[0][box.slices()] = view.state[box.slices()]
+            if surface is not None:
+                region = surface.slices()
+                self.shared[1][region] = view.surface_weight[region]
+                self.shared[2][region] = view.surface_directions[region]
+        return box, surface
 
-    def _sync_loop(self, state: Any, period_s: float = 0.2) -> None:
+    def _sync_loop(self, view: MapView, period_s: float = 0.2) -> None:
         from worker.sandbox.protocol import write_message
 
         while not self._stop_sync.wait(period_s):
             with self._lock:
-                box = self._copy_changes(state)
-                if box is None:
+                box, surface = self._copy_changes(view)
+                if box is None and surface is None:
                     continue
                 try:
-                    write_message(self._to, {"op": "sync",
-                                             "box": [list(box.lo), list(box.hi)]})
+                    write_message(self._to, {"op": "sync", "box": _box_message(box),
+                                             "surface_box": _box_message(surface)})
                 except (OSError, ValueError):
                     return  # the process is gone; the next plan call reports why
 
@@ -295,6 +309,10 @@ class SandboxedPlanner:
 
 def isolation_limit() -> int:
     return MAX_MESSAGE_BYTES + 1
+
+
+def _box_message(box: IndexBox | None) -> list[list[int]] | None:
+    return None if box is None else [list(box.lo), list(box.hi)]
 
 
 def _shm_root() -> str | None:
