@@ -82,7 +82,7 @@ class Classic(Planner):
         return Plan(
             waypoints,
             horizon_s=0.0,
-            info={"clusters": len(clusters), "path_m": float(field.dist_m[tuple(goal)])},
+            info={"clusters": len(clusters), "path_m": field.distance_to(goal)},
         )
 
     def _count_visit(self, here: IndexArray, obs: Observation) -> None:

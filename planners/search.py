@@ -6,6 +6,9 @@ any planner can reuse them with its own notion of where the vehicle may fly.
 
 from __future__ import annotations
 
+import threading
+from functools import cached_property
+
 import numba
 import numpy as np
 import numpy.typing as npt
@@ -81,21 +84,29 @@ def _dijkstra(
     offsets: IndexArray,
     step_cost: npt.NDArray[np.float64],
     max_cost: float,
-) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], int]:
+    dist: npt.NDArray[np.float64],
+    parent: npt.NDArray[np.int64],
+    done: npt.NDArray[np.bool_],
+    touched: npt.NDArray[np.int64],
+) -> tuple[int, npt.NDArray[np.int64], int]:
     """Distances in voxels from `start`; stops at the first popped voxel set in `goals`
-    (returned as a flat index, -1 if none) or when the frontier passes `max_cost`."""
+    (returned as a flat index, -1 if none) or when the frontier passes `max_cost`.
+
+    `dist`, `parent` and `done` are flat workspaces over the grid, clean on entry (inf, -1,
+    False); the search writes its results there and lists every voxel it gave a distance in
+    `touched` (grown when full; the array in use is returned with the count), so that the
+    caller can read and clean up only those instead of the whole grid.
+    """
     nx, ny, nz = passable.shape
-    n_total = passable.size
-    dist = np.full(n_total, np.inf, dtype=np.float64)
-    parent = np.full(n_total, -1, dtype=np.int64)
-    done = np.zeros(n_total, dtype=np.bool_)
     flat_passable = passable.ravel()
     flat_goals = goals.ravel()
     # Lazy deletion bounds pushes by the number of relaxations; grow on demand.
-    keys = np.empty(1 << 16, dtype=np.float64)
-    vals = np.empty(1 << 16, dtype=np.int64)
+    keys = np.empty(1 << 12, dtype=np.float64)
+    vals = np.empty(1 << 12, dtype=np.int64)
     s = (start[0] * ny + start[1]) * nz + start[2]
     dist[s] = 0.0
+    touched[0] = s
+    n_touched = 1
     size = _heap_push(keys, vals, 0, 0.0, s)
     while size > 0:
         d = keys[0]
@@ -107,7 +118,7 @@ def _dijkstra(
             break
         done[cur] = True
         if flat_goals[cur]:
-            return dist.reshape(passable.shape), parent, cur
+            return cur, touched, n_touched
         ci = cur // (ny * nz)
         cj = (cur // nz) % ny
         ck = cur % nz
@@ -124,20 +135,50 @@ def _dijkstra(
                 continue
             nd = d + step_cost[n]
             if nd < dist[idx]:
+                if dist[idx] == np.inf:
+                    if n_touched == touched.shape[0]:
+                        touched = np.concatenate((touched, np.empty_like(touched)))
+                    touched[n_touched] = idx
+                    n_touched += 1
                 dist[idx] = nd
                 parent[idx] = cur
                 if size == keys.shape[0]:
                     keys = np.concatenate((keys, np.empty_like(keys)))
                     vals = np.concatenate((vals, np.empty_like(vals)))
                 size = _heap_push(keys, vals, size, nd, idx)
-    return dist.reshape(passable.shape), parent, -1
+    return -1, touched, n_touched
+
+
+class _Workspace:
+    """Flat buffers over one grid, reused by every search in a thread and clean between them:
+    a search then costs what it visits, not the grid's size (allocating and filling three
+    grid-sized arrays per call cost more than most searches, and several times more where fresh
+    pages are expensive, as in the planner sandbox)."""
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self.dist = np.full(size, np.inf, dtype=np.float64)
+        self.parent = np.full(size, -1, dtype=np.int64)
+        self.done = np.zeros(size, dtype=np.bool_)
+        self.touched = np.empty(1 << 12, dtype=np.int64)
+
+
+_WORKSPACES = threading.local()
+
+
+def _workspace(size: int) -> _Workspace:
+    ws: _Workspace | None = getattr(_WORKSPACES, "current", None)
+    if ws is None or ws.size != size:
+        ws = _WORKSPACES.current = _Workspace(size)
+    return ws
 
 
 class DistanceField:
     """Shortest path lengths (metres) from one voxel through passable voxels, 26-connected.
 
     With `goals`, the search stops at the nearest goal voxel (`nearest_goal`); distances are then
-    final only for voxels no farther than that goal.
+    final only for voxels no farther than that goal. Results are kept for the visited voxels only;
+    `dist_m` expands them to a grid when asked.
     """
 
     def __init__(
@@ -159,26 +200,54 @@ class DistanceField:
         if goals is not None and goals.shape != passable.shape:
             raise ValueError(f"goals shape {goals.shape} differs from the grid {passable.shape}")
         self.voxel_size = voxel_size
-        goal_mask = goals if goals is not None else np.zeros((1, 1, 1), dtype=np.bool_)
-        if goals is None:
-            goal_mask = np.zeros(passable.shape, dtype=np.bool_)
-        dist, self._parent, goal = _dijkstra(
-            passable, self.start, goal_mask, _OFFSETS, _STEP_COST, max_cost_m / voxel_size
+        goal_mask = goals if goals is not None else np.zeros(passable.shape, dtype=np.bool_)
+        ws = _workspace(int(passable.size))
+        goal, ws.touched, count = _dijkstra(
+            passable, self.start, goal_mask, _OFFSETS, _STEP_COST, max_cost_m / voxel_size,
+            ws.dist, ws.parent, ws.done, ws.touched,
         )
-        self.dist_m = dist * voxel_size
+        visited = ws.touched[:count]
+        self._index = np.sort(visited)
+        self._dist_m = ws.dist[self._index] * voxel_size
+        self._parent = ws.parent[self._index]
+        ws.dist[visited] = np.inf
+        ws.parent[visited] = -1
+        ws.done[visited] = False
         self.nearest_goal: IndexArray | None = (
             np.array(np.unravel_index(goal, self.shape), dtype=np.int64) if goal >= 0 else None
         )
 
+    @cached_property
+    def dist_m(self) -> npt.NDArray[np.float64]:
+        """(nx, ny, nz) path lengths in metres, inf where the search did not reach."""
+        flat = np.full(int(np.prod(self.shape)), np.inf, dtype=np.float64)
+        flat[self._index] = self._dist_m
+        grid: npt.NDArray[np.float64] = flat.reshape(self.shape)
+        grid.setflags(write=False)
+        return grid
+
+    def _position(self, flat: int) -> int:
+        """Where voxel `flat` is in the visited arrays, -1 if it was not visited."""
+        pos = int(np.searchsorted(self._index, flat))
+        return pos if pos < len(self._index) and self._index[pos] == flat else -1
+
+    def distance_to(self, voxel: npt.ArrayLike) -> float:
+        """Path length (m) to `voxel` (3,), inf if the search did not reach it."""
+        v = np.asarray(voxel, dtype=np.int64)
+        pos = self._position(int(np.ravel_multi_index(tuple(v), self.shape)))
+        return float(self._dist_m[pos]) if pos >= 0 else float("inf")
+
     def path_to(self, goal: npt.ArrayLike) -> IndexArray:
         """(K, 3) voxel indices from the start to `goal`; empty if unreachable."""
         g = np.asarray(goal, dtype=np.int64)
-        if not np.isfinite(self.dist_m[g[0], g[1], g[2]]):
-            return np.zeros((0, 3), dtype=np.int64)
         flat = int(np.ravel_multi_index(tuple(g), self.shape))
+        pos = self._position(flat)
+        if pos < 0 or not np.isfinite(self._dist_m[pos]):
+            return np.zeros((0, 3), dtype=np.int64)
         chain = [flat]
-        while self._parent[chain[-1]] >= 0:
-            chain.append(int(self._parent[chain[-1]]))
+        while (up := int(self._parent[pos])) >= 0:
+            chain.append(up)
+            pos = self._position(up)
         return np.stack(np.unravel_index(np.array(chain[::-1]), self.shape), axis=1)
 
 

@@ -362,3 +362,27 @@ def test_nearest_traversable_none_when_nothing_is_traversable() -> None:
     np.testing.assert_array_equal(
         nearest_traversable(traversable, np.array([3, 3, 3])), [0, 0, 0]
     )
+
+
+def test_searches_in_a_row_do_not_see_each_other() -> None:
+    """Searches share their buffers: one stopped early, one bounded by cost and one full, in any
+    order, each give what the reference gives alone."""
+    rng = np.random.default_rng(3)
+    passable = rng.random((14, 12, 6)) < 0.8
+    starts = [tuple(int(v) for v in s) for s in np.argwhere(passable)[[0, 40, 200]]]
+    goals = np.zeros_like(passable)
+    goals[tuple(np.argwhere(passable)[300])] = True
+    for start in starts * 2:
+        early = DistanceField(passable, start, VOXEL, goals=goals)
+        bounded = DistanceField(passable, start, VOXEL, max_cost_m=0.35)
+        full = DistanceField(passable, start, VOXEL)
+        reference = reference_distances(passable, start) * VOXEL
+        np.testing.assert_allclose(full.dist_m, reference, atol=1e-9)
+        near = bounded.dist_m <= 0.35
+        np.testing.assert_allclose(bounded.dist_m[near], reference[near], atol=1e-9)
+        if early.nearest_goal is not None:
+            goal = tuple(int(v) for v in early.nearest_goal)
+            assert early.distance_to(goal) == pytest.approx(reference[goal])
+            assert_chain(early.path_to(goal), passable, start, goal)
+        for voxel in np.argwhere(passable)[::37]:
+            assert full.distance_to(voxel) == pytest.approx(reference[tuple(voxel)])
