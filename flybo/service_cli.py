@@ -1,4 +1,5 @@
-"""`flybo serve`, `worker`, `tokens` and the HTTP client commands `submit`, `jobs`, `results`."""
+"""`flybo serve`, `worker`, `tokens` and the HTTP client commands `submit`, `jobs`, `results`,
+`benchmark` (a whole suite as one job group) and `report` (the paper's tables and figures)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 COMMANDS = ("serve", "worker", "viewer", "tokens", "submit", "submit-planner", "jobs",
-            "results")
+            "results", "benchmark", "report")
 DEFAULT_SERVER = "http://127.0.0.1:8000"
 
 
@@ -80,12 +81,42 @@ def add_service_commands(sub: Any) -> None:
     client(results)
     results.add_argument("--preset", default="default")
     results.add_argument("--area", default=None)
+    _add_suite_commands(sub, client)
+
+
+def _add_suite_commands(sub: Any, client: Any) -> None:
+    bench = sub.add_parser("benchmark", help="submit the whole suite (planners x areas x runs) "
+                                             "as one job group and wait for it")
+    client(bench)
+    bench.add_argument("--url", dest="server", help="same as --server")
+    bench.add_argument("--planners", nargs="+", default=["all"],
+                       help="planner names, or 'all' for every built-in planner (default)")
+    bench.add_argument("--areas", nargs="+", default=["all"],
+                       help="area names, or 'all' for every built-in area (default)")
+    bench.add_argument("--runs", type=int, default=5, help="runs per area (default 5)")
+    bench.add_argument("--preset", default="default")
+    bench.add_argument("--name", default=None, help="a name for the group")
+    length = bench.add_mutually_exclusive_group()
+    length.add_argument("--seconds", type=float, default=None,
+                        help="simulated seconds of every run (default: each area's plateau)")
+    length.add_argument("--time-scale", type=float, default=None,
+                        help="run each area for this fraction (0-1] of its plateau time")
+    bench.add_argument("--follow", type=int, default=None, metavar="GROUP",
+                       help="do not submit: wait for the group GROUP submitted earlier")
+    bench.add_argument("--no-wait", action="store_true", help="submit and return")
+    report = sub.add_parser("report", help="the paper's Tables 1-4 (CSV, Markdown) and "
+                                           "Figures 4-6 (PNG, SVG) from a service")
+    client(report)
+    report.add_argument("--url", dest="server", help="same as --server")
+    report.add_argument("--out", type=Path, default=Path("report"),
+                        help="output folder (default ./report)")
+    report.add_argument("--preset", default="default")
 
 
 def run_service_command(args: argparse.Namespace) -> None:
     {"serve": _serve, "worker": _worker, "tokens": _tokens, "submit": _submit, "jobs": _jobs,
      "results": _results, "submit-planner": _submit_planner,
-     "viewer": _viewer}[args.command](args)
+     "viewer": _viewer, "benchmark": _benchmark, "report": _report}[args.command](args)
 
 
 def check_planner(path: Path) -> None:
@@ -254,20 +285,28 @@ def _demo(factory: Any, settings: Any, url: str) -> None:
 # -- HTTP client ------------------------------------------------------------------------------
 
 def _request(args: argparse.Namespace, method: str, path: str, *, auth: bool = False,
-             **kwargs: Any) -> Any:
+             headers: dict[str, str] | None = None, retries: int = 0, **kwargs: Any) -> Any:
+    """`retries`: attempts after a transport error (only for requests safe to repeat, such as
+    a POST with an Idempotency-Key)."""
     import httpx
 
-    headers = {}
+    headers = dict(headers or {})
     if auth:
         if not args.token:
             raise _error("an API token is needed: pass --token or set FLYBO_TOKEN "
                          "(`flybo tokens create --user NAME` on the server prints one)")
         headers["Authorization"] = f"Bearer {args.token}"
-    try:
-        response = httpx.request(method, args.server.rstrip("/") + "/api/v1" + path,
-                                 headers=headers, timeout=30.0, **kwargs)
-    except httpx.HTTPError as exc:
-        raise _error(f"cannot reach {args.server}: {exc}") from None
+    for attempt in range(retries + 1):
+        try:
+            response = httpx.request(method, args.server.rstrip("/") + "/api/v1" + path,
+                                     headers=headers, timeout=30.0, **kwargs)
+            break
+        except httpx.TransportError as exc:
+            if attempt == retries:
+                raise _error(f"cannot reach {args.server}: {exc}") from None
+            time.sleep(2.0)
+        except httpx.HTTPError as exc:
+            raise _error(f"cannot reach {args.server}: {exc}") from None
     if response.status_code >= 400:
         try:
             detail = response.json().get("detail", response.text)
@@ -348,3 +387,105 @@ def _results(args: argparse.Namespace) -> None:
         fscore = f"{p['mean_fscore']:.3f}" if p["mean_fscore"] is not None else "-"
         print(f"{p['rank']:>4}  {p['planner']:<18} {p['areas']:>5} {p['mean_coverage']:>9.4f} "
               f"{p['mean_coverage_rank']:>9.2f} {fscore:>8}")
+
+
+# -- the suite: `flybo benchmark`, `flybo report` ---------------------------------------------
+
+def _names(values: list[str]) -> list[str]:
+    """Names given space- or comma-separated."""
+    return [n.strip() for v in values for n in v.split(",") if n.strip()]
+
+
+def _benchmark(args: argparse.Namespace) -> None:
+    import uuid
+
+    if args.follow is not None:
+        _wait_group(args, args.follow)
+        return
+    if args.runs < 1:
+        raise _error("--runs must be at least 1")
+    body: dict[str, Any] = {"planners": _names(args.planners), "areas": _names(args.areas),
+                            "runs": args.runs, "preset": args.preset}
+    for key in ("name", "seconds", "time_scale"):
+        if getattr(args, key) is not None:
+            body[key] = getattr(args, key)
+    # One key per invocation: a retry after a lost answer returns the same group.
+    key = uuid.uuid4().hex
+    group = _request(args, "POST", "/groups", auth=True, json=body,
+                     headers={"Idempotency-Key": key}, retries=2)
+    print(f"group {group['id']} ({group['name']}): {len(group['planners'])} planner(s), "
+          f"{len(group['areas'])} area(s), {group['runs']} runs, "
+          f"{sum(p['simulated_s'] for p in group['planners']):,.0f} simulated s")
+    if not args.no_wait:
+        _wait_group(args, group["id"])
+
+
+def _wait_group(args: argparse.Namespace, group_id: int) -> None:
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+    )
+
+    final = {"succeeded", "failed", "cancelled"}
+    try:
+        with Progress(TextColumn("{task.description:<20}"), BarColumn(), MofNCompleteColumn(),
+                      TextColumn("{task.fields[states]}"), TimeElapsedColumn()) as bar:
+            tasks: dict[str, Any] = {}
+            while True:
+                group = _request(args, "GET", f"/groups/{group_id}")
+                rows = [("all runs", group["runs"], group["done"], group["by_status"])]
+                rows += [(p["planner"], p["runs"], p["done"], p["by_status"])
+                         for p in group["planners"]]
+                for label, total, done, states in rows:
+                    if label not in tasks:
+                        tasks[label] = bar.add_task(label, total=total, states="")
+                    bar.update(tasks[label], completed=done, states=_states(states))
+                if group["status"] in final:
+                    break
+                time.sleep(2.0)
+    except KeyboardInterrupt:
+        print(f"\nstopped waiting; group {group_id} keeps running on the service. Follow it "
+              f"with `flybo benchmark --follow {group_id}` (or GET /api/v1/groups/{group_id}); "
+              f"stop it with POST /api/v1/groups/{group_id}/cancel.", file=sys.stderr)
+        raise SystemExit(130) from None
+    _print_group(group)
+    if group["status"] != "succeeded":
+        raise SystemExit(1)
+
+
+def _states(counts: dict[str, int]) -> str:
+    return ", ".join(f"{n} {s}" for s, n in counts.items() if n and s != "succeeded")
+
+
+def _print_group(group: dict[str, Any]) -> None:
+    print(f"group {group['id']} ({group['name']}): {group['status']}, preset "
+          f"{group['preset']}, areas {', '.join(group['areas'])}")
+    print(f"  {'planner':<18} {'runs':>5} {'ok':>5} {'failed':>6} {'cancelled':>9} "
+          f"{'simulated s':>12}  jobs")
+    for p in group["planners"]:
+        s = p["by_status"]
+        print(f"  {p['planner']:<18} {p['runs']:>5} {s['succeeded']:>5} {s['failed']:>6} "
+              f"{s['cancelled']:>9} {p['simulated_s']:>12,.0f}  "
+              f"{', '.join(str(j) for j in p['jobs'])}")
+    print(f"results: `flybo results --preset {group['preset']}`; tables and figures: "
+          f"`flybo report --preset {group['preset']}`")
+
+
+def _report(args: argparse.Namespace) -> None:
+    import httpx
+
+    from flybo.report import ReportError, fetch_report_data, write_report
+
+    try:
+        with httpx.Client(base_url=args.server.rstrip("/"), timeout=60.0) as client:
+            data = fetch_report_data(client, args.preset)
+    except ReportError as exc:
+        raise _error(str(exc)) from None
+    written = write_report(data, args.out)
+    print(f"report of preset {args.preset} ({len(data.board.overall)} planner(s), "
+          f"{len(data.board.areas)} area(s) with results) in {args.out}/:")
+    for path in written:
+        print(f"  {path.name}")

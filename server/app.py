@@ -23,7 +23,7 @@ from server.catalog import sync_builtin_areas, sync_builtin_planners
 from server.db import make_engine, make_session_factory, read_only, session_scope
 from server.middleware import install_middleware
 from server.migrate import upgrade
-from server.routes import areas, curves, health, jobs, leaderboard, planners, runs
+from server.routes import areas, curves, groups, health, jobs, leaderboard, planners, runs
 from server.settings import Settings, load_settings
 from server.sweeper import sweep
 
@@ -87,7 +87,7 @@ def create_app(settings: Settings | None = None, *, sweeper: bool = True,
     app.state.sessions = sessions
     app.state.read_sessions = read_sessions
     app.include_router(health.router)
-    for router in (areas.router, planners.router, jobs.router, runs.router,
+    for router in (areas.router, planners.router, jobs.router, groups.router, runs.router,
                    leaderboard.router, curves.router):
         app.include_router(router, prefix=API_PREFIX)
     install_middleware(app, settings)

@@ -141,6 +141,30 @@ class PlannerRow(Base):
         return f"{self.name}-v{self.version}"
 
 
+class JobGroup(Base):
+    """Jobs submitted together (`flybo benchmark`): one per planner of a suite."""
+
+    __tablename__ = "job_groups"
+    __table_args__ = (
+        UniqueConstraint("user_id", "idempotency_key", name="uq_job_groups_user_idempotency_key"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    user_id: Mapped[int] = mapped_column(ForeignKey("users.id"), index=True)
+    name: Mapped[str] = mapped_column(String(128))
+    preset: Mapped[str] = mapped_column(String(32))
+    runs_per_area: Mapped[int] = mapped_column(Integer)
+    seconds: Mapped[float | None] = mapped_column(Float, nullable=True)
+    # A fraction of each area's plateau time; None: the whole plateau (or `seconds`).
+    time_scale: Mapped[float | None] = mapped_column(Float, nullable=True)
+    idempotency_key: Mapped[str | None] = mapped_column(String(128), nullable=True)
+    request_hash: Mapped[str] = mapped_column(String(64))
+    created_at: Mapped[datetime] = mapped_column(_TS, default=utcnow, index=True)
+
+    user: Mapped[User] = relationship()
+    jobs: Mapped[list[Job]] = relationship(back_populates="group", order_by="Job.id")
+
+
 class Job(Base):
     __tablename__ = "jobs"
     __table_args__ = (
@@ -157,9 +181,12 @@ class Job(Base):
     request_hash: Mapped[str] = mapped_column(String(64))
     rerun_of_id: Mapped[int | None] = mapped_column(ForeignKey("jobs.id"), nullable=True)
     created_at: Mapped[datetime] = mapped_column(_TS, default=utcnow, index=True)
+    group_id: Mapped[int | None] = mapped_column(ForeignKey("job_groups.id"), nullable=True,
+                                                 index=True)
 
     planner: Mapped[PlannerRow] = relationship()
     user: Mapped[User] = relationship()
+    group: Mapped[JobGroup | None] = relationship(back_populates="jobs")
     runs: Mapped[list[Run]] = relationship(back_populates="job", order_by="Run.id")
 
 

@@ -20,7 +20,7 @@ from server.deps import SessionDep
 from server.models import AreaRow
 from server.routes.areas import area_out
 from server.schemas import AreaOut
-from web.html import DASH, esc, not_found, page
+from web.html import DASH, esc, not_found, page, table, td
 
 router = APIRouter(include_in_schema=False)
 _render_lock = threading.Lock()
@@ -65,14 +65,46 @@ def _card(area: AreaOut) -> str:
         f"<a href='/api/v1/areas/{name}'>JSON</a></p></article>")
 
 
+def _table1(areas: list[AreaOut]) -> str:
+    """The paper's Table 1: one row per area, as `flybo report` writes it."""
+    headers = [("Area", ""), ("Title", ""), ("Bounding box, m", "x × y × z of the mesh"),
+               ("Rooms", ""), ("Levels", ""), ("Triangles", "faces of the mesh"),
+               ("Complexity", ""), ("Indoor / outdoor", ""),
+               ("Plateau time, s", "how long each run lasts"), ("Voxel, m", "")]
+    rows = []
+    for a in areas:
+        box = a.stats.get("bounding_volume_m")
+        # Sorted by the box's volume.
+        volume = (float(box[0] * box[1] * box[2]) if isinstance(box, list) and len(box) == 3
+                  else None)
+        indoor = a.stats.get("indoor")
+        cells = [
+            td(f"<a href='#area-{esc(a.name)}'>{esc(a.name)}</a>", a.name),
+            td(esc(a.title), a.title),
+            td(esc(_value(box)), volume, "num"),
+            _num_td(a.stats.get("rooms")), _num_td(a.stats.get("levels")),
+            _num_td(a.stats.get("faces")),
+            td(esc(_value(a.stats.get("complexity"))), str(a.stats.get("complexity") or "")),
+            td(DASH if indoor is None else ("indoor" if indoor else "outdoor")),
+            _num_td(a.plateau_s), _num_td(a.voxel_size)]
+        rows.append(f"<tr>{''.join(cells)}</tr>")
+    return table("Table 1: statistics of the areas", headers, rows, table_id="areas-table",
+                 empty="No areas are registered yet.")
+
+
+def _num_td(value: Any) -> str:
+    number = value if isinstance(value, int | float) and not isinstance(value, bool) else None
+    return td(esc(_value(value)), number, "num")
+
+
 @router.get("/areas", response_class=HTMLResponse)
 def areas_page(session: SessionDep) -> HTMLResponse:
     rows = [area_out(r) for r in session.scalars(select(AreaRow).order_by(AreaRow.name))]
     cards = "".join(_card(a) for a in rows) or "<p>No areas are registered yet.</p>"
     body = ("<h1>Areas</h1><p class='lead'>The simulated scenes planners are tested in, with "
             f"their statistics (the paper's Table 1). {len(rows)} areas.</p>"
-            f"<div class='gallery'>{cards}</div>")
-    return page("Areas", body, current="/areas")
+            f"{_table1(rows)}<div class='gallery'>{cards}</div>")
+    return page("Areas", body, scripts=("sort.js",), current="/areas")
 
 
 def _thumbnail(name: str, view: Literal["top", "perspective"]) -> Path | None:
