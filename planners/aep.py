@@ -44,6 +44,9 @@ class AepConfig(NbvpConfig):
     zero_gain: float = Field(1.0, ge=0.0)
     # AEP's own global step (cached nodes, then A*) replaces NBVP's whole-area tree.
     wide_below_gain_m3: float | None = None
+    # Our choice: AEP counts a view only above its `zero_gain` of 1 m³, more than the unknown
+    # wall interior seen through holes that made NBVP stall; its gain is cast as published.
+    surface_gap_m: float | None = None
     # aep/gain/r_max: 5
     gain_range_m: float | None = Field(5.0, gt=0.0)
     # AEP picks the best yaw of each node.

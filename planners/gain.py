@@ -133,10 +133,17 @@ class GainEvaluator:
         self.max_range_m = camera.max_range_m if max_range_m is None else max_range_m
         self.evaluations = 0
 
-    def columns(self, view: MapView, position: npt.ArrayLike) -> FloatArray:
-        """(A,) unknown volume per azimuth column around `position` (world (3,))."""
+    def columns(self, view: MapView, position: npt.ArrayLike,
+                state: npt.NDArray[np.uint8] | None = None) -> FloatArray:
+        """(A,) unknown volume per azimuth column around `position` (world (3,)).
+
+        Args:
+            state: (nx, ny, nz) voxel states to cast through instead of the view's (the same
+                grid, e.g. with narrow gaps in occupied surfaces closed).
+        """
         self.evaluations += 1
-        return _column_gains(view.state, np.asarray(view.origin, dtype=np.float64),
+        return _column_gains(view.state if state is None else state,
+                             np.asarray(view.origin, dtype=np.float64),
                              float(view.voxel_size), np.asarray(position, dtype=np.float64),
                              self.rays.directions, self.rays.solid_angles, self.step_m,
                              self.min_range_m, self.max_range_m)

@@ -12,6 +12,10 @@ until the tree has `min_nodes` nodes (N_init) and some branch is worth more than
 (NBVP: 0, any gain at all), or gives up at `max_nodes` nodes (N_tol). The previous
 iteration's best branch, less its flown first edge, seeds the new tree so that a good plan is
 not lost to sampling.
+
+`close_surface_gaps` closes narrow gaps in the map's occupied surfaces for the gain's rays
+(NBVP: the unknown interior of walls seen through holes in their occupied layer would otherwise
+keep a gain that no flight can reduce, see `planners.nbvp`).
 """
 
 from __future__ import annotations
@@ -27,8 +31,10 @@ from planners.gain import GainEvaluator
 from planners.lines import segment_clear_world
 from planners.rrt import Tree, extend
 from sim.map_view import MapView
+from sim.occupancy import VoxelState
 
 FloatArray = npt.NDArray[np.float64]
+StateGrid = npt.NDArray[np.uint8]
 
 
 @dataclass(frozen=True)
@@ -58,8 +64,8 @@ class TreeOutcome:
 
 
 def _node_gain(gains: GainEvaluator, view: MapView, position: FloatArray, yaw_mode: str,
-               rng: np.random.Generator) -> tuple[float, float]:
-    columns = gains.columns(view, position)
+               rng: np.random.Generator, state: StateGrid | None) -> tuple[float, float]:
+    columns = gains.columns(view, position, state)
     if yaw_mode == "best":
         best = gains.best(columns)
         return best.yaw, best.gain
@@ -92,12 +98,14 @@ def grow_tree(
     bounds_min: FloatArray,
     bounds_max: FloatArray,
     seed_branch: FloatArray | None = None,
+    gain_state: StateGrid | None = None,
 ) -> TreeOutcome:
     """Grow a tree from `root` (world (3,)).
 
     Args:
         seed_branch: (M, 4) x, y, z, yaw of the previous best branch, re-inserted as a chain
             from the root as far as its edges are still clear.
+        gain_state: (nx, ny, nz) voxel states the gains are cast through instead of the map's.
     """
     tree = Tree(root, root_yaw)
     if seed_branch is not None:
@@ -110,7 +118,7 @@ def grow_tree(
                     and segment_clear_world(view, view.traversable, tree.positions[parent], p)):
                 break
             parent = tree.add(p.copy(), parent, float(row[3]))
-            yaw, gain = _node_gain(gains, view, p, settings.yaw, rng)
+            yaw, gain = _node_gain(gains, view, p, settings.yaw, rng, gain_state)
             tree.gains[parent] = gain
             tree.yaws[parent] = yaw
     values = _values(tree, settings.degressive_coeff)
@@ -137,7 +145,8 @@ def grow_tree(
         if node < 0:
             failures += 1
             continue
-        yaw, gain = _node_gain(gains, view, tree.positions[node], settings.yaw, rng)
+        yaw, gain = _node_gain(gains, view, tree.positions[node], settings.yaw, rng,
+                               gain_state)
         tree.yaws[node] = yaw
         tree.gains[node] = gain
         if settings.rewire_radius_m is None and tree.size == before + 1:
@@ -153,3 +162,30 @@ def grow_tree(
     tree.values[:] = values
     best_value = float(values[best])
     return TreeOutcome(tree, best, best_value, best_value > settings.zero_gain, stalled)
+
+
+def close_surface_gaps(state: StateGrid, gap_voxels: int) -> StateGrid:
+    """(nx, ny, nz) states with every voxel that lies, along some axis, between two occupied
+    voxels at most `gap_voxels` + 1 apart made occupied: holes that grazing rays sweep in a
+    surface's occupied layer, and the unknown interior of walls at most `gap_voxels` thick."""
+    occupied = state == VoxelState.OCCUPIED
+    fill = np.zeros_like(occupied)
+    for axis in range(3):
+        n = state.shape[axis]
+        below = np.zeros_like(occupied)  # an occupied voxel 1..d below, for growing d
+        for d in range(1, gap_voxels + 1):
+            shifted = np.zeros_like(occupied)
+            dst = [slice(None)] * 3
+            src = [slice(None)] * 3
+            dst[axis], src[axis] = slice(d, n), slice(0, n - d)
+            shifted[tuple(dst)] = occupied[tuple(src)]
+            below |= shifted
+            # occupied exactly (gap_voxels + 1 - d) above pairs with anything 1..d below
+            up = gap_voxels + 1 - d
+            above = np.zeros_like(occupied)
+            dst[axis], src[axis] = slice(0, n - up), slice(up, n)
+            above[tuple(dst)] = occupied[tuple(src)]
+            fill |= below & above
+    closed = state.copy()
+    closed[fill] = VoxelState.OCCUPIED
+    return closed

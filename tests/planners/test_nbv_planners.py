@@ -9,8 +9,8 @@ import pytest
 
 from planners.aep import Aep, AepConfig
 from planners.gain import GainEvaluator
-from planners.nbv_tree import TreeSettings, grow_tree
-from planners.nbvp import NbvpConfig
+from planners.nbv_tree import TreeSettings, close_surface_gaps, grow_tree
+from planners.nbvp import Nbvp, NbvpConfig
 from planners.registry import make
 from sim.camera import CameraConfig
 from sim.geometry import Pose
@@ -254,3 +254,49 @@ def test_aep_finishes_with_nothing_cached_and_nothing_to_see() -> None:
     planner.reset(_context())
     plan = planner.plan(_observe(_corridor(8.0)))
     assert plan.done
+
+
+def _holed_wall() -> np.ndarray:
+    """All known but a thick wall at y < 0.3 m whose unknown interior shows through a hole in
+    its occupied layer, 1.8 m to the vehicle's right (as grazing rays leave walls on MAZE)."""
+    state = _corridor(8.0)
+    state[:, 0:2, 1:-1] = VoxelState.UNKNOWN  # the wall's interior, never observable
+    state[:, 2, :] = VoxelState.OCCUPIED  # its surface layer...
+    state[18:21, 2, 10:15] = VoxelState.FREE  # ...with a hole swept free
+    return state
+
+
+def test_nbvp_closes_holes_in_walls_before_counting_the_unknown_behind_them() -> None:
+    """The wall's interior, seen through a hole in its occupied layer, keeps a gain that no
+    flight can reduce: the original rule never finishes there; with narrow gaps in occupied
+    surfaces closed for the gain, nothing is left to see and NBVP ends."""
+    state = _holed_wall()
+    right = -math.pi / 2
+    obs = _observe(state, yaw=right, outcome=PlanOutcome.REACHED)
+    planner = make("nbvp", {"max_nodes": 40})
+    assert isinstance(planner, Nbvp)
+    planner.reset(_context())
+    gains = planner.gain_evaluator(VOXEL)
+    assert gains.gain(obs.map, START, right) > 0.0
+    assert planner.plan(obs).done
+    closed = planner._gain_state
+    assert closed is not None
+    assert gains.at_yaw(gains.columns(obs.map, START, closed), right) == 0.0
+    original = make("nbvp", {"max_nodes": 40, "surface_gap_m": None})
+    original.reset(_context())
+    plan = original.plan(obs)
+    assert not plan.done and plan.info["best_value"] > 0.0
+
+
+def test_closing_surface_gaps_keeps_openings_the_vehicle_can_use() -> None:
+    """A 0.3 m gap in a wall closes; a 0.4 m one, the corridor and unknown space do not."""
+    state = _corridor(8.0)
+    state[:, 25:, :] = VoxelState.UNKNOWN
+    state[:, 20, :] = VoxelState.OCCUPIED  # a wall along x at y = 2 m...
+    state[10:13, 20, 5:20] = VoxelState.FREE  # ...with a 0.3 m gap
+    state[30:34, 20, 5:20] = VoxelState.FREE  # and a 0.4 m one
+    closed = close_surface_gaps(state, 3)
+    assert np.all(closed[10:13, 20, 5:20] == VoxelState.OCCUPIED)
+    assert np.all(closed[30:34, 20, 5:20] == VoxelState.FREE)
+    changed = closed != state
+    assert not np.any(changed[:, 21:, :]) and not np.any(changed[:, 1:20, 1:-1])
