@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import signal
 import subprocess
@@ -221,7 +222,10 @@ def _serve(args: argparse.Namespace) -> None:
         raise _error(f"--port must be 1-65535, got {args.port}")
     settings = _settings()
     factory = _migrated(settings)
-    workers = [subprocess.Popen([sys.executable, "-m", "flybo", "worker"])
+    # Each worker leads its own process group (Celery's pool processes included), so that
+    # stopping the service can stop all of them; and it is told to stop if the service dies.
+    workers = [subprocess.Popen([sys.executable, "-m", "flybo", "worker"],
+                                start_new_session=True, preexec_fn=_stop_with_parent)
                for _ in range(max(args.workers, 0))]
     url = f"http://{args.host}:{args.port}"
     viewer = None
@@ -253,11 +257,23 @@ def _serve(args: argparse.Namespace) -> None:
             viewer.stop()
         for proc in workers:
             proc.send_signal(signal.SIGTERM)
+        deadline = time.monotonic() + 20.0
         for proc in workers:
-            try:
-                proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                proc.wait(timeout=max(deadline - time.monotonic(), 0.1))
+            # A run still flying is given back to the queue (acks late) and flown again later.
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+
+
+def _stop_with_parent() -> None:
+    """In a worker before it starts: SIGTERM when the service process dies (Linux)."""
+    import ctypes
+
+    pr_set_pdeathsig = 1
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, signal.SIGTERM)
 
 
 def _demo(factory: Any, settings: Any, url: str) -> None:
