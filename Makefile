@@ -6,8 +6,10 @@ STAMP := $(VENV)/.installed
 SYSTEM_LIBS := libusb-1.0-0 libgl1 libegl1 libgomp1 bubblewrap
 # Browser tests drive Debian's Chromium through Playwright (never a downloaded browser).
 TEST_SYSTEM_PACKAGES := chromium
+# The HTTP load generator of benchmarks/leaderboard_throughput.py (benchmarks only).
+BENCHMARK_SYSTEM_PACKAGES := wrk
 
-.PHONY: install system-deps test-system-deps apt-packages run demo-run test lint typecheck benchmark clean
+.PHONY: install system-deps test-system-deps benchmark-system-deps apt-packages run demo-run test lint typecheck benchmark clean
 
 install: $(STAMP)
 
@@ -18,6 +20,9 @@ system-deps:
 
 test-system-deps:
 	@$(MAKE) --no-print-directory apt-packages PACKAGES="$(TEST_SYSTEM_PACKAGES)"
+
+benchmark-system-deps:
+	@$(MAKE) --no-print-directory apt-packages PACKAGES="$(BENCHMARK_SYSTEM_PACKAGES)"
 
 apt-packages:
 	@missing=""; for p in $(PACKAGES); do \
@@ -51,7 +56,7 @@ test: install test-system-deps
 	$(BIN)/mypy
 	$(BIN)/pytest
 
-benchmark: install
+benchmark: install benchmark-system-deps
 	$(BIN)/python benchmarks/sim_speed.py
 
 clean:

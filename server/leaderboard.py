@@ -4,18 +4,29 @@ Ranks follow the paper: per area, planners are ranked by mean coverage and by me
 (1 is best, ties share the mean rank); the overall table averages them over the areas a planner
 ran. Relative coverage is a run's explored volume at the plateau time over the best mean of any
 planner on that area (`docs/metrics.md`).
+
+Every API process caches the computed boards per database and (preset, area), with their JSON
+bodies, under the results version of the preset. Every request checks that version (exact: no
+staleness window); concurrent API requests share one check (`_Gate`), so a busy endpoint costs
+one small query per batch of requests and serves stored bytes.
 """
 
 from __future__ import annotations
 
+import asyncio
+import hashlib
 import threading
+import weakref
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
-from sqlalchemy import func, select
-from sqlalchemy.orm import Session
+from pydantic import TypeAdapter
+from sqlalchemy import Connection, Engine, func, select
+from sqlalchemy.orm import Session, sessionmaker
 
+from server.db import read_only
 from server.models import AreaRow, Job, PlannerRow, Run, RunResult, RunState
 from server.schemas import Leaderboard, LeaderboardEntry, LeaderboardPlanner, Spread
 
@@ -50,32 +61,179 @@ def ranks(scores: dict[str, float]) -> dict[str, float]:
     return out
 
 
-_cache: dict[tuple[str, str | None], tuple[tuple[int, int, int], Leaderboard]] = {}
-_cache_lock = threading.Lock()
+Version = tuple[int, int, int]
+_MAX_ENTRIES = 256  # cached boards (and gates, locks) per database before starting afresh
+_ADAPTER = TypeAdapter(Leaderboard)
+# The stored results' version for one preset: count and highest id of its succeeded runs, and
+# the number of planners. One statement, so that a check is one round trip.
+_PLANNERS = select(func.count(PlannerRow.id)).scalar_subquery()
+
+
+def results_version(conn: Connection | Session, preset: str) -> Version:
+    """What the cached leaderboards of `preset` are valid for (an indexed aggregate)."""
+    row = conn.execute(
+        select(func.count(Run.id), func.coalesce(func.max(Run.id), 0), _PLANNERS)
+        .where(Run.status == RunState.SUCCEEDED.value, Run.preset == preset)).one()
+    return int(row[0]), int(row[1]), int(row[2] or 0)
+
+
+@dataclass(frozen=True)
+class Served:
+    """One computed leaderboard and its response body, exactly as FastAPI would serialize the
+    `Leaderboard` response model, with a strong ETag of that body."""
+
+    version: Version
+    board: Leaderboard
+    body: bytes
+    etag: str
+
+    @classmethod
+    def of(cls, version: Version, board: Leaderboard) -> Served:
+        body = _ADAPTER.dump_json(board, by_alias=True)
+        return cls(version, board, body, '"' + hashlib.blake2b(body, digest_size=16).hexdigest()
+                   + '"')
+
+
+class _Gate:
+    """Exact freshness for concurrent async requests at one query per batch.
+
+    A request needs a version check that started after it arrived (what a query of its own would
+    give). Requests that arrive while a check runs wait for the next one, which starts as soon as
+    that check ends and answers all of them: under load one query serves many requests.
+    """
+
+    def __init__(self) -> None:
+        self.loop: asyncio.AbstractEventLoop | None = None
+        self.waiters: list[asyncio.Future[Version]] = []
+        self.task: asyncio.Task[None] | None = None
+        self.computing: dict[str | None, asyncio.Lock] = {}
+
+    async def version(self, check: Callable[[], Version]) -> Version:
+        loop = asyncio.get_running_loop()
+        if self.loop is not loop:  # a new event loop (tests): nothing carries over
+            self.loop, self.waiters, self.task, self.computing = loop, [], None, {}
+        waiter: asyncio.Future[Version] = loop.create_future()
+        self.waiters.append(waiter)
+        if self.task is None:
+            self.task = loop.create_task(self._drain(check))
+        return await waiter
+
+    async def _drain(self, check: Callable[[], Version]) -> None:
+        try:
+            while self.waiters:
+                waiters, self.waiters = self.waiters, []
+                try:
+                    version = await asyncio.to_thread(check)
+                except Exception as exc:
+                    for w in waiters:
+                        if not w.done():
+                            w.set_exception(exc)
+                else:
+                    for w in waiters:
+                        if not w.done():
+                            w.set_result(version)
+        finally:
+            self.task = None
+
+
+class _Store:
+    """The cached leaderboards of one database (one engine's pool)."""
+
+    def __init__(self) -> None:
+        self.served: dict[tuple[str, str | None], Served] = {}
+        self.gates: dict[str, _Gate] = {}
+        self.reader: Engine | None = None  # for version checks: a bare connection, no session
+        self.lock = threading.Lock()
+
+    def get(self, key: tuple[str, str | None], version: Version) -> Served | None:
+        with self.lock:
+            hit = self.served.get(key)
+        return hit if hit is not None and hit.version == version else None
+
+    def put(self, key: tuple[str, str | None], served: Served) -> None:
+        with self.lock:
+            if len(self.served) > _MAX_ENTRIES:
+                self.served.clear()
+            self.served[key] = served
+
+
+# Per database, so that two apps (or tests) on different databases never share an entry.
+_stores: weakref.WeakKeyDictionary[Any, _Store] = weakref.WeakKeyDictionary()
+_stores_lock = threading.Lock()
+
+
+def _store(bind: Engine | Connection) -> _Store:
+    pool = bind.engine.pool
+    with _stores_lock:
+        store = _stores.get(pool)
+        if store is None:
+            store = _stores[pool] = _Store()
+        return store
 
 
 def build_leaderboard(session: Session, preset: str, area: str | None = None) -> Leaderboard:
-    """The leaderboard, recomputed only when the stored results changed.
+    """The leaderboard, recomputed only when the stored results changed (a copy to keep).
 
     The check is one indexed aggregate (count and highest id of finished runs, number of
     planners), so polling clients cost little; every API process keeps its own copy.
     """
-    version_row = session.execute(
-        select(func.count(Run.id), func.coalesce(func.max(Run.id), 0))
-        .where(Run.status == RunState.SUCCEEDED.value, Run.preset == preset)).one()
-    planners = session.scalar(select(func.count(PlannerRow.id))) or 0
-    version = (int(version_row[0]), int(version_row[1]), int(planners))
+    return _served(session, preset, area).board.model_copy(deep=True)
+
+
+def _served(session: Session, preset: str, area: str | None) -> Served:
+    store = _store(session.get_bind())
+    version = results_version(session, preset)
+    hit = store.get((preset, area), version)
+    if hit is not None:
+        return hit
+    served = Served.of(version, compute_leaderboard(session, preset, area))
+    store.put((preset, area), served)
+    return served
+
+
+async def serve_leaderboard(engine: Engine, sessions: sessionmaker[Session], preset: str,
+                            area: str | None = None) -> Served:
+    """The current leaderboard and its body, for the API (`engine` names the database,
+    `sessions` read it). The version check is shared by the requests waiting for it (see
+    `_Gate`), and a stale board is recomputed once, in a thread, however many requests ask for
+    it meanwhile."""
+    store = _store(engine)
     key = (preset, area)
-    with _cache_lock:
-        hit = _cache.get(key)
-    if hit is not None and hit[0] == version:
-        return hit[1].model_copy(deep=True)
-    board = compute_leaderboard(session, preset, area)
-    with _cache_lock:
-        if len(_cache) > 256:
-            _cache.clear()
-        _cache[key] = (version, board)
-    return board.model_copy(deep=True)
+    with store.lock:
+        gate = store.gates.get(preset)
+        if gate is None:
+            if len(store.gates) > _MAX_ENTRIES:  # presets are free text: do not grow unbounded
+                store.gates.clear()  # a gate still in use finishes its checks on its own
+            gate = store.gates[preset] = _Gate()
+        if store.reader is None:
+            store.reader = read_only(engine)
+        reader = store.reader
+
+    def check() -> Version:
+        with reader.connect() as conn:
+            return results_version(conn, preset)
+
+    version = await gate.version(check)
+    hit = store.get(key, version)
+    if hit is not None:
+        return hit
+    lock = gate.computing.get(area)
+    if lock is None:
+        if len(gate.computing) > _MAX_ENTRIES:
+            gate.computing.clear()
+        lock = gate.computing[area] = asyncio.Lock()
+    async with lock:
+        hit = store.get(key, version)
+        if hit is not None:
+            return hit
+
+        def compute() -> Served:
+            with sessions() as session:
+                served = Served.of(version, compute_leaderboard(session, preset, area))
+            store.put(key, served)
+            return served
+
+        return await asyncio.to_thread(compute)
 
 
 def compute_leaderboard(session: Session, preset: str, area: str | None = None) -> Leaderboard:
