@@ -24,7 +24,8 @@ from planners.registry import make, spec
 from sim.config import preset
 from sim.episode import run_episode
 
-TARGETS = {"rapid": 0.90, "nbvp": 0.80, "aep": 0.85, "classic": 0.90}
+TARGETS = {"rapid": 0.90, "nbvp": 0.80, "aep": 0.85, "classic": 0.90, "splatplanner": 0.90,
+           "esm-ipp": 0.90, "esm-recon": 0.90}
 
 
 def run_one(planner: str, seed: int, preset_name: str) -> dict[str, Any]:

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 from planners.aep import Aep
 from planners.classic import Classic
+from planners.esm import Esm, EsmRecon
 from planners.nbvp import Nbvp
 from planners.rapid import Rapid
 from planners.registry import register
+from planners.splat import SplatPlanner
 
 register(
     "classic",
@@ -41,4 +43,34 @@ register(
     "when the local gain runs out.",
     reference="M. Selin, M. Tiger, D. Duberg, F. Heintz, P. Jensfelt, Efficient autonomous "
     "exploration planning of large-scale 3-D environments, RA-L 2019",
+)
+register(
+    "splatplanner",
+    1,
+    SplatPlanner,
+    description="Frontier voxels (position, normal) filtered on a permutohedral lattice; the "
+    "viewpoint with the best filtered frontier density per flight time, reached by A*.",
+    reference="A. Brunel, A. Bourki, C. Demonceaux, O. Strauss, SplatPlanner: efficient "
+    "autonomous exploration via permutohedral frontier filtering, ICRA 2021",
+)
+register(
+    "esm-ipp",
+    1,
+    Esm,
+    description="One persistent RRT* tree of segments grown at every call, valued by the "
+    "unknown volume seen per second of flight along each branch; flies the best root child, "
+    "re-roots there, recomputes stale gains lazily, back-tracks when nothing is worth flying.",
+    reference="L. Schmid, M. Pantic, R. Khanna, L. Ott, R. Siegwart, J. Nieto, An efficient "
+    "sampling-based method for online informative path planning in unknown environments, "
+    "RA-L 2020",
+)
+register(
+    "esm-recon",
+    1,
+    EsmRecon,
+    description="ESM with a reconstruction gain: surface voxels seen by few fused frames or "
+    "from few directions, plus unknown volume, per second of flight.",
+    reference="L. Schmid, M. Pantic, R. Khanna, L. Ott, R. Siegwart, J. Nieto, An efficient "
+    "sampling-based method for online informative path planning in unknown environments, "
+    "RA-L 2020",
 )

@@ -1,0 +1,393 @@
+"""ESM: efficient sampling-based online informative path planning (Schmid et al., RA-L 2020).
+
+One tree of straight trajectory segments, rooted at the vehicle, persists for the whole
+exploration and grows at every planning call (the paper expands it continuously while flying):
+samples are drawn around the root until it has `local_count` nodes within `local_radius_m`, then
+uniformly in the area; each is steered at most `extension_m` from its nearest node, kept only in
+traversable space and at least `density_radius_m` from every node, and gets the gain of its view
+at its best yaw. It is inserted RRT*-style (`planners.segment_tree`): the parent that maximises
+its value, then nearby nodes re-hung under it where that raises their value. Every segment is
+checked against `traversable` again at each call; blocked ones are dropped with their subtrees.
+
+A node's value is the best gain per second of flight of any branch through it (the paper's
+normalized gain: sum of gains / sum of segment flight times from the root, maximised over the
+subtree). The vehicle flies the root's child of highest value; that child becomes the root, the
+segment just flown is reversed so that the old root and its other branches hang from the new root
+(the paper re-hangs them, reinserting the old root where needed), and the old root's other
+children are re-hung under better parents where that raises their value.
+
+Gains are recomputed lazily: each stores the simulated time it was computed; since gains only
+shrink as the map fills in, a stale gain bounds the current one from above, so the best branch is
+found best-first, recomputing only the stale nodes on the branch that currently looks best until
+the best branch is all fresh.
+
+When no branch is worth `min_value`, the vehicle flies back along the stack of positions it
+planned from (a straight line, or an A* path when that is blocked) while the tree keeps growing;
+exploration ends when the stack is empty and still nothing is worth flying to.
+
+ESM-IPP scores a view by the unknown volume it would see (`planners.gain`); ESM-Recon by its
+reconstruction gain (`planners.recon_gain`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+from pydantic import Field
+
+from planners.api import Observation, Plan, Planner, PlannerConfig, PlannerContext
+from planners.astar import PathCache
+from planners.gain import GainEvaluator
+from planners.lines import reachable_lengths, segment_clear_world, segments_clear
+from planners.recon_gain import ReconGainEvaluator
+from planners.rrt import steer
+from planners.search import shortcut
+from planners.segment_tree import (
+    BoolArray,
+    FlightTime,
+    SegmentTree,
+    insert,
+    prune_blocked,
+    rewire,
+)
+from planners.waypoints import nearest_traversable, path_waypoints
+from sim.map_view import MapView
+
+FloatArray = npt.NDArray[np.float64]
+
+
+class EsmConfig(PlannerConfig):
+    """ESM's settings. Unless noted, defaults are those of the authors' public exploration
+    configuration (`exploration_planner.yaml` of mav_active_3d_planning: `trajectory_generator/
+    ...` keys, an RRTStar generator)."""
+
+    # Which gain scores a view: ESM-IPP's volumetric or ESM-Recon's reconstruction gain.
+    gain: Literal["volumetric", "reconstruction"] = "volumetric"
+    # max_extension_range: 1.5
+    extension_m: float = Field(1.5, gt=0.0)
+    # max_rewire_range: 1.6
+    rewire_radius_m: float = Field(1.6, gt=0.0)
+    # n_neighbors: 20
+    neighbours: int = Field(20, ge=1)
+    # max_density_range: 1.0
+    density_radius_m: float = Field(1.0, ge=0.0)
+    # sampling_mode "semilocal": semilocal_sampling_count: 10
+    local_count: int = Field(10, ge=0)
+    # semilocal_sampling_radius_max / _min: 1.5
+    local_radius_m: float = Field(1.5, gt=0.0)
+    # crop_segments: true, crop_margin: 0.3: a segment blocked before its end is cut short
+    # of the block by this much ...
+    crop_margin_m: float = Field(0.3, ge=0.0)
+    # ... and kept if at least this long (crop_min_length: 0.5)
+    crop_min_m: float = Field(0.5, gt=0.0)
+    # Our choice: the paper expands while flying; here each call samples this many points ...
+    tries_per_call: int = Field(300, ge=1)
+    # ... and stops after this many new segments, to bound the time charged per call.
+    new_per_call: int = Field(20, ge=1)
+    # sensor_model/ray_length: 5.0 (the camera's range)
+    gain_range_m: float | None = Field(5.0, gt=0.0)
+    # Our choice: 10° rays, as AEP here; the paper's ContinuousYawPlanningEvaluator tries 12
+    # yaws (30° apart), we take the best of the 36 column windows.
+    ray_step_deg: float = Field(10.0, gt=0.0, le=30.0)
+    # Value (gain per second of flight, m³/s) a branch must exceed to be flown; the paper flies
+    # any positive value (min_new_value: 0). Our choice: a trace above 0, so that the last
+    # unobservable specks of unknown space do not keep the vehicle roaming.
+    min_value: float = Field(0.01, ge=0.0)
+    # back_tracker/stack_size: 10 in the paper; our choice: unbounded, so that the vehicle can
+    # retrace its whole way before giving up (the tree keeps growing on the way).
+    backtrack_stack: int | None = Field(None, ge=1)
+    # Our choice: a vehicle within this of the flown segment's end has reached it.
+    reach_tolerance_m: float = Field(0.3, gt=0.0)
+    # Reconstruction gain (ESM-Recon): unknown volume counts as in the volumetric gain (our
+    # choice: the paper counts frontier voxels only, with weight frontier_voxel_weight: 1.0).
+    unknown_weight: float = Field(1.0, ge=0.0)
+    # The paper counts each visible surface voxel by its TSDF impact, weight 1.
+    surface_weight: float = Field(1.0, ge=0.0)
+    # Our choice: a surface voxel seen from a new 45° azimuth sector adds half a voxel.
+    direction_bonus: float = Field(0.5, ge=0.0)
+    # TSDF weight one more frame adds: 1 (one fused frame, the unit of `surface_weight`).
+    new_weight: float = Field(1.0, gt=0.0)
+    # Our choice: 0.2, i.e. a surface stops counting once fused from 5 frames. The paper's
+    # min_impact_factor (0.01) applies to its per-ray TSDF weights; with one unit per fused
+    # frame 0.01 keeps a surface worth seeing for 99 frames, and on MAZE the vehicle then kept
+    # re-viewing explored walls instead of exploring (coverage 0.616 at 700 s on one seed).
+    min_impact: float = Field(0.2, ge=0.0, le=1.0)
+    # Our choice: a surface voxel seen from two 45° sectors earns no more direction bonus.
+    min_directions: int = Field(2, ge=1, le=8)
+
+
+class EsmReconConfig(EsmConfig):
+    """ESM-Recon: the same planner scoring views by their reconstruction gain."""
+
+    gain: Literal["volumetric", "reconstruction"] = "reconstruction"
+
+
+class Esm(Planner):
+    config_model = EsmConfig
+    config: EsmConfig
+
+    def reset(self, ctx: PlannerContext) -> None:
+        super().reset(ctx)
+        lim = ctx.limits
+        self._flight = FlightTime(lim.v_max, lim.a_max, lim.yaw_rate_max, lim.yaw_acc_max)
+        self._gains: GainEvaluator | None = None
+        self._tree: SegmentTree | None = None
+        self._pending = -1  # the node being flown to
+        self._stack: list[FloatArray] = []  # positions planned from, for back-tracking
+        self._paths = PathCache()
+        self._view: MapView | None = None
+        self._refreshed = 0
+
+    # -- services --------------------------------------------------------------------------
+    def gain_evaluator(self, voxel_size: float) -> GainEvaluator:
+        if self._gains is None:
+            cfg, camera = self.config, self.context.camera
+            if cfg.gain == "reconstruction":
+                self._gains = ReconGainEvaluator(
+                    camera, cfg.ray_step_deg, voxel_size, cfg.gain_range_m,
+                    unknown_weight=cfg.unknown_weight, surface_weight=cfg.surface_weight,
+                    direction_bonus=cfg.direction_bonus, new_weight=cfg.new_weight,
+                    min_impact=cfg.min_impact, min_directions=cfg.min_directions)
+            else:
+                self._gains = GainEvaluator(camera, cfg.ray_step_deg, voxel_size,
+                                            cfg.gain_range_m)
+        return self._gains
+
+    def _clear(self, a: FloatArray, b: FloatArray) -> BoolArray:
+        view = self._current_view()
+        return segments_clear(view, view.traversable, a, b)
+
+    def _current_view(self) -> MapView:
+        if self._view is None:
+            raise RuntimeError("no map view")
+        return self._view
+
+    @property
+    def tree(self) -> SegmentTree | None:
+        return self._tree
+
+    # -- planning --------------------------------------------------------------------------
+    def plan(self, obs: Observation) -> Plan:
+        self._view = obs.map
+        root, snapped = self._root(obs)
+        if root is None:
+            return Plan.finished("the vehicle is not in traversable space")
+        tree = self._attach(root, obs.pose.yaw)
+        dropped, _ = prune_blocked(tree, self._clear, self._flight, self.config.rewire_radius_m,
+                                   self.config.neighbours)
+        tree.gains[tree.root] = 0.0  # the vehicle is there: nothing left to gain
+        tree.stamps[tree.root] = obs.time
+        added = self._expand(tree, obs)
+        self._refreshed = 0
+        child, value = self.select(tree, obs.map, obs.time)
+        info: dict[str, float | int | str] = {
+            "nodes": int(tree.size), "added": added, "dropped": dropped,
+            "refreshed": self._refreshed, "value": value,
+        }
+        if child < 0 or value <= self.config.min_value:
+            return self._back_track(obs, info)
+        self._stack.append(tree.positions[tree.root].copy())
+        limit = self.config.backtrack_stack
+        if limit is not None and len(self._stack) > limit:
+            del self._stack[: len(self._stack) - limit]
+        self._pending = child
+        waypoints = np.array([[*tree.positions[child], tree.yaws[child]]])
+        if snapped:
+            waypoints = np.vstack([[*tree.positions[tree.root], tree.yaws[child]], waypoints])
+        info.update(mode="tree", gain=float(tree.gains[child]))
+        return Plan(waypoints, info=info)
+
+    def _root(self, obs: Observation) -> tuple[FloatArray | None, bool]:
+        """The vehicle's position, or the nearest traversable voxel centre when the vehicle
+        stands where the map no longer allows (True then)."""
+        view = obs.map
+        here = np.asarray(obs.pose.position, dtype=np.float64)
+        voxel = view.world_to_index(here[None])[0]
+        start = nearest_traversable(view.traversable, voxel)
+        if start is None:
+            return None, False
+        if np.array_equal(start, voxel):
+            return here.copy(), False
+        return view.index_to_world(start[None])[0], True
+
+    def _attach(self, root: FloatArray, yaw: float) -> SegmentTree:
+        """The tree rooted at `root`: re-rooted at the segment just flown when the vehicle
+        reached it, else hung from a new root node at the vehicle."""
+        cfg, tree = self.config, self._tree
+        pending, self._pending = self._pending, -1
+        if tree is None:
+            self._tree = SegmentTree(root, yaw)
+            return self._tree
+        if pending >= 0 and np.linalg.norm(tree.positions[pending] - root) <= \
+                cfg.reach_tolerance_m:
+            old = tree.root
+            tree.reroot(pending, self._flight)
+            tree.positions[pending] = root
+            tree.yaws[pending] = yaw
+            for child in tree.children(old):
+                rewire(tree, int(child), self._clear, self._flight, cfg.rewire_radius_m,
+                       cfg.neighbours)
+            if len(tree.children(old)) == 0:
+                keep = np.ones(tree.size, dtype=bool)
+                keep[old] = False
+                tree.keep(keep)
+            return tree
+        # Back-tracked or stopped short: hang the tree from the vehicle through the nearest
+        # node with a clear segment, reversing the way from it to the old root.
+        near = tree.near(root, cfg.rewire_radius_m, cfg.neighbours)
+        if len(near):
+            near = near[self._clear(np.repeat(root[None], len(near), axis=0),
+                                    tree.positions[near])]
+        if len(near) == 0:
+            self._tree = SegmentTree(root, yaw)
+            return self._tree
+        link = int(near[0])
+        tree.reroot(link, self._flight)
+        new_root = tree.add(root, -1, yaw, 0.0)
+        cost = float(self._flight(root, yaw, tree.positions[link], tree.yaws[link])[0])
+        tree.set_parent(link, new_root, cost)
+        tree.root = new_root
+        return tree
+
+    def _evaluate(self, view: MapView, position: FloatArray) -> tuple[float, float]:
+        """(yaw, gain) of the best view at `position`."""
+        best = self.gain_evaluator(view.voxel_size).best_view(view, position)
+        return best.yaw, best.gain
+
+    def _expand(self, tree: SegmentTree, obs: Observation) -> int:
+        """Grow the tree by up to `new_per_call` segments; returns how many were added."""
+        cfg, ctx, view = self.config, self.context, obs.map
+        rng = ctx.rng
+        root = tree.positions[tree.root]
+        d_root = np.linalg.norm(tree.positions - root, axis=1)
+        local_missing = cfg.local_count - (int(np.count_nonzero(d_root <= cfg.local_radius_m))
+                                           - 1)
+        added = 0
+        for _ in range(cfg.tries_per_call):
+            if added >= cfg.new_per_call:
+                break
+            if local_missing > 0:
+                # Semilocal sampling: a point on the sphere of `local_radius_m` round the root.
+                direction = rng.normal(size=3)
+                direction /= max(float(np.linalg.norm(direction)), 1e-12)
+                sample = root + cfg.local_radius_m * direction
+            else:
+                sample = rng.uniform(ctx.bounds_min, ctx.bounds_max)
+            nearest = tree.nearest(sample)
+            new = self._crop(view, tree.positions[nearest], sample)
+            if new is None:
+                continue
+            if float(np.min(np.sum((tree.positions - new) ** 2, axis=1))) < \
+                    cfg.density_radius_m ** 2:
+                continue
+            yaw, gain = self._evaluate(view, new)
+            node = insert(tree, new, yaw, gain, obs.time, self._clear, self._flight,
+                          cfg.rewire_radius_m, cfg.neighbours)
+            if node < 0:
+                continue
+            added += 1
+            if np.linalg.norm(new - root) <= cfg.local_radius_m + 1e-9:
+                local_missing -= 1
+        return added
+
+    def _crop(self, view: MapView, start: FloatArray, sample: FloatArray) -> FloatArray | None:
+        """The point `extension_m` from `start` toward `sample`, or, where the way is blocked
+        before, `crop_margin_m` short of the block (None if that leaves less than
+        `crop_min_m`): the paper crops its segments the same way."""
+        cfg = self.config
+        goal = steer(start, sample, cfg.extension_m)
+        full = float(np.linalg.norm(goal - start))
+        if full < 1e-6:
+            return None
+        reach = float(reachable_lengths(view, start, goal[None])[0])
+        length = full if reach >= full - 1e-9 else reach - cfg.crop_margin_m
+        if length < min(cfg.crop_min_m, full):
+            return None
+        point: FloatArray = start + (goal - start) * (length / full)
+        voxel = view.world_to_index(point[None])[0]
+        if not (np.all(view.in_bounds(voxel[None]))
+                and view.traversable[voxel[0], voxel[1], voxel[2]]):
+            return None
+        return point
+
+    def refresh(self, tree: SegmentTree, view: MapView, node: int, now: float) -> None:
+        """Recompute the gain and best yaw of `node` on the current map."""
+        yaw, gain = self._evaluate(view, tree.positions[node])
+        self._refreshed += 1
+        tree.gains[node] = gain
+        tree.stamps[node] = now
+        if yaw != tree.yaws[node]:
+            tree.yaws[node] = yaw
+            # The yaw changes the flight time of its own segment and of those leaving it.
+            parent = int(tree.parents[node])
+            if parent >= 0:
+                tree.costs[node] = float(self._flight(tree.positions[parent], tree.yaws[parent],
+                                                      tree.positions[node], yaw)[0])
+            kids = tree.children(node)
+            if len(kids):
+                tree.costs[kids] = self._flight(
+                    np.repeat(tree.positions[node][None], len(kids), axis=0), yaw,
+                    tree.positions[kids], tree.yaws[kids])
+
+    def select(self, tree: SegmentTree, view: MapView, now: float) -> tuple[int, float]:
+        """The root's child leading to the best branch, and its value, recomputing stale
+        gains best-first (stale gains are upper bounds); (-1, 0) for a lone root."""
+        if tree.size < 2:
+            return -1, 0.0
+        while True:
+            g, c, _ = tree.accumulate()
+            ratio = np.where(c > 0.0, g / np.maximum(c, 1e-12), 0.0)
+            ratio[tree.root] = -math.inf
+            end = int(np.argmax(ratio))
+            branch = tree.path(end)[1:]
+            stale = branch[tree.stamps[branch] < now]
+            if len(stale) == 0:
+                return int(branch[0]), float(ratio[end])
+            for node in stale:
+                self.refresh(tree, view, int(node), now)
+
+    def _back_track(self, obs: Observation, info: dict[str, float | int | str]) -> Plan:
+        """Fly back to the last position on the stack that can be reached."""
+        here = np.asarray(obs.pose.position, dtype=np.float64)
+        while self._stack:
+            target = self._stack.pop()
+            if np.linalg.norm(target - here) < self.config.reach_tolerance_m:
+                continue
+            waypoints = self._way_to(obs, target)
+            if waypoints is not None:
+                info.update(mode="back", stack=len(self._stack))
+                return Plan(waypoints, info=info)
+        plan = Plan.finished("no branch worth flying and nothing left to go back to")
+        plan.info.update(info)
+        return plan
+
+    def _way_to(self, obs: Observation, target: FloatArray) -> FloatArray | None:
+        """(N, 4) waypoints to `target`: straight if clear, else a shortest grid path."""
+        view = obs.map
+        here = np.asarray(obs.pose.position, dtype=np.float64)
+        yaw = float(obs.pose.yaw)
+        if segment_clear_world(view, view.traversable, here, target):
+            heading = target - here
+            if np.linalg.norm(heading[:2]) > 1e-6:
+                yaw = float(np.arctan2(heading[1], heading[0]))
+            return np.array([[*target, yaw]])
+        start = nearest_traversable(view.traversable, view.world_to_index(here[None])[0])
+        goal = nearest_traversable(view.traversable, view.world_to_index(target[None])[0])
+        if start is None or goal is None or np.array_equal(start, goal):
+            return None
+        path, _ = self._paths.path(view.traversable, start, goal, view.voxel_size)
+        if len(path) < 2:
+            return None
+        path = shortcut(path, view.traversable)
+        look = view.index_to_world(goal[None])[0] + 2.0 * (target - here)
+        waypoints: FloatArray = path_waypoints(view, path, obs.pose.position, look)
+        return waypoints
+
+
+class EsmRecon(Esm):
+    """ESM-Recon: `Esm` with the reconstruction gain."""
+
+    config_model = EsmReconConfig
