@@ -53,7 +53,7 @@ from planners.segment_tree import (
     prune_blocked,
     rewire,
 )
-from planners.waypoints import nearest_traversable, path_waypoints
+from planners.waypoints import nearest_traversable, path_waypoints, tree_root
 from sim.map_view import MapView
 
 FloatArray = npt.NDArray[np.float64]
@@ -172,7 +172,7 @@ class Esm(Planner):
     # -- planning --------------------------------------------------------------------------
     def plan(self, obs: Observation) -> Plan:
         self._view = obs.map
-        root, snapped = self._root(obs)
+        root, snapped = tree_root(obs.map, obs.pose.position)
         if root is None:
             return Plan.finished("the vehicle is not in traversable space")
         tree = self._attach(root, obs.pose.yaw)
@@ -200,18 +200,6 @@ class Esm(Planner):
         info.update(mode="tree", gain=float(tree.gains[child]))
         return Plan(waypoints, info=info)
 
-    def _root(self, obs: Observation) -> tuple[FloatArray | None, bool]:
-        """The vehicle's position, or the nearest traversable voxel centre when the vehicle
-        stands where the map no longer allows (True then)."""
-        view = obs.map
-        here = np.asarray(obs.pose.position, dtype=np.float64)
-        voxel = view.world_to_index(here[None])[0]
-        start = nearest_traversable(view.traversable, voxel)
-        if start is None:
-            return None, False
-        if np.array_equal(start, voxel):
-            return here.copy(), False
-        return view.index_to_world(start[None])[0], True
 
     def _attach(self, root: FloatArray, yaw: float) -> SegmentTree:
         """The tree rooted at `root`: re-rooted at the segment just flown when the vehicle

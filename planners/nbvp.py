@@ -38,7 +38,7 @@ from planners.nbv_tree import (
     grow_tree,
 )
 from planners.search import shortcut
-from planners.waypoints import nearest_traversable, path_waypoints
+from planners.waypoints import nearest_traversable, path_waypoints, tree_root
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -121,7 +121,7 @@ class Nbvp(Planner):
 
     def plan(self, obs: Observation) -> Plan:
         here = np.asarray(obs.pose.position, dtype=np.float64)
-        root, snapped = self._root(obs)
+        root, snapped = tree_root(obs.map, obs.pose.position)
         if root is None:
             return Plan.finished("the vehicle is not in traversable space")
         self._gain_state = self._closed_surfaces(obs)
@@ -192,7 +192,7 @@ class Nbvp(Planner):
                    local: TreeOutcome) -> tuple[Plan | None, TreeOutcome]:
         """The first edge of a tree sampled in the whole area (None if it finds no gain either),
         and that tree (the local one if none could be grown)."""
-        root, snapped = self._root(obs)
+        root, snapped = tree_root(obs.map, obs.pose.position)
         if root is None:
             return None, local
         ctx = self.context
@@ -208,18 +208,6 @@ class Nbvp(Planner):
         plan.info["mode"] = "wide"
         return plan, outcome
 
-    def _root(self, obs: Observation) -> tuple[FloatArray | None, bool]:
-        """The tree's root: the vehicle's position, or the nearest traversable voxel centre if
-        the vehicle stands where the map no longer allows (True then)."""
-        view = obs.map
-        here = np.asarray(obs.pose.position, dtype=np.float64)
-        voxel = view.world_to_index(here[None])[0]
-        start = nearest_traversable(view.traversable, voxel)
-        if start is None:
-            return None, False
-        if np.array_equal(start, voxel):
-            return here.copy(), False
-        return view.index_to_world(start[None])[0], True
 
     def _first_edge(self, outcome: TreeOutcome, snapped: bool, obs: Observation,
                     mode: str = "local", local_value: float | None = None) -> Plan:

@@ -30,6 +30,21 @@ def nearest_traversable(
     return cells[best].astype(np.int64)
 
 
+def tree_root(view: MapView,
+              position: npt.ArrayLike) -> tuple[npt.NDArray[np.float64] | None, bool]:
+    """Where a tree of the vehicle's moves starts: its `position` (3,), or the nearest
+    traversable voxel centre when it stands where the map no longer allows (True then); None
+    when no traversable voxel is near."""
+    here = np.asarray(position, dtype=np.float64)
+    voxel = view.world_to_index(here[None])[0]
+    start = nearest_traversable(view.traversable, voxel)
+    if start is None:
+        return None, False
+    if np.array_equal(start, voxel):
+        return here.copy(), False
+    return view.index_to_world(start[None])[0], True
+
+
 def path_waypoints(
     view: MapView,
     path: IndexArray,
