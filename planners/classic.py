@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
-from planners.api import Observation, Plan, Planner, PlannerConfig, PlannerContext, PlanOutcome
+from planners.api import Observation, Plan, Planner, PlannerConfig, PlannerContext
+from planners.give_up import GiveUpTracker
 from planners.search import DistanceField, IndexArray, shortcut
 from planners.viewpoints import frontier_viewpoints, ring_offsets
 from planners.waypoints import nearest_traversable, path_waypoints
@@ -40,17 +41,14 @@ class Classic(Planner):
         self._offsets = ring_offsets(
             cfg.view_distances_m, cfg.view_height_offsets_m, cfg.view_directions
         )
-        self._given_up: np.ndarray | None = None
+        self._give_up = GiveUpTracker(cfg.give_up_after, cfg.give_up_radius_voxels)
         self._goal: IndexArray | None = None
         self._target: IndexArray | None = None
-        self._visits: dict[tuple[int, int, int], int] = {}
 
     def plan(self, obs: Observation) -> Plan:
         cfg, view = self.config, obs.map
-        if self._given_up is None:
-            self._given_up = np.zeros(view.shape, dtype=np.bool_)
         here = view.world_to_index(obs.pose.position[None])[0]
-        self._count_visit(here, obs)
+        given_up = self._give_up.update(here, self._goal, self._target, obs)
         clusters = view.frontier_clusters(cfg.min_cluster_size)
         if not clusters:
             return Plan.finished("no frontier left")
@@ -64,7 +62,7 @@ class Classic(Planner):
             samples_per_cluster=cfg.samples_per_cluster,
             max_elevation_rad=np.radians(cfg.max_view_elevation_deg),
             max_range_m=self.context.camera.max_range_m,
-            excluded=self._given_up,
+            excluded=given_up,
         )
         if len(viewpoints) == 0:
             return Plan.finished("no frontier can be seen from traversable space")
@@ -84,19 +82,3 @@ class Classic(Planner):
             horizon_s=0.0,
             info={"clusters": len(clusters), "path_m": field.distance_to(goal)},
         )
-
-    def _count_visit(self, here: IndexArray, obs: Observation) -> None:
-        """Give up a target that is still a frontier after the vehicle reached its viewpoint."""
-        if self._goal is None or self._target is None or self._given_up is None:
-            return
-        arrived = obs.last_outcome == PlanOutcome.REACHED and np.max(np.abs(here - self._goal)) <= 1
-        t = self._target
-        if not arrived or not obs.map.frontier[t[0], t[1], t[2]]:
-            return
-        key = (int(t[0]), int(t[1]), int(t[2]))
-        self._visits[key] = self._visits.get(key, 0) + 1
-        if self._visits[key] >= self.config.give_up_after:
-            r = self.config.give_up_radius_voxels
-            lo = np.maximum(t - r, 0)
-            hi = t + r + 1
-            self._given_up[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = True

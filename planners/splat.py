@@ -27,9 +27,10 @@ import numpy as np
 import numpy.typing as npt
 from pydantic import Field
 
-from planners.api import Observation, Plan, Planner, PlannerConfig, PlannerContext, PlanOutcome
+from planners.api import Observation, Plan, Planner, PlannerConfig, PlannerContext
 from planners.astar import PathCache
 from planners.classic import Classic, ClassicConfig
+from planners.give_up import GiveUpTracker
 from planners.lines import segments_clear
 from planners.permutohedral import PermutohedralLattice
 from planners.search import IndexArray, shortcut
@@ -82,7 +83,7 @@ class SplatConfig(PlannerConfig):
     num_candidates: int = Field(20, ge=1)
     # Authors' implementation (computeBestPath): views scoring below 0.01 are skipped.
     min_density: float = Field(0.01, ge=0.0)
-    # Classic's give-up rule for targets that stay frontiers after visits.
+    # Classic's give-up rule (`planners.give_up`) for targets that stay frontiers after visits.
     give_up_after: int = Field(2, ge=1)
     give_up_radius_voxels: int = Field(2, ge=0)
     fallback: ClassicConfig = ClassicConfig()
@@ -192,21 +193,19 @@ class SplatPlanner(Planner):
         self._paths = PathCache()
         self._fallback = Classic(self.config.fallback)
         self._fallback.reset(ctx)
-        self._given_up: npt.NDArray[np.bool_] | None = None
+        self._give_up = GiveUpTracker(self.config.give_up_after,
+                                      self.config.give_up_radius_voxels)
         self._goal: IndexArray | None = None
         self._target: IndexArray | None = None
-        self._visits: dict[tuple[int, int, int], int] = {}
         self._splat: PermutohedralLattice | None = None
         self._splat_base = 0
         self._splatted = (np.zeros(0, dtype=np.int64), np.zeros((0, 6)), np.zeros(0))
 
     def plan(self, obs: Observation) -> Plan:
         view = obs.map
-        if self._given_up is None:
-            self._given_up = np.zeros(view.shape, dtype=np.bool_)
         here = view.world_to_index(np.asarray(obs.pose.position)[None])[0]
-        self._count_visit(here, obs)
-        voxels = np.argwhere(view.frontier & ~self._given_up)
+        given_up = self._give_up.update(here, self._goal, self._target, obs)
+        voxels = np.argwhere(view.frontier & ~given_up)
         if len(voxels) == 0:
             return self._fall_back(obs, "no frontier")
         start = nearest_traversable(view.traversable, here)
@@ -394,20 +393,3 @@ class SplatPlanner(Planner):
         info = dict(plan.info)
         info.update({"mode": "classic", "why": why, "vertices": vertices})
         return Plan(plan.waypoints, horizon_s=plan.horizon_s, info=info)
-
-    def _count_visit(self, here: IndexArray, obs: Observation) -> None:
-        """Give up a target that is still a frontier after the vehicle reached its viewpoint."""
-        if self._goal is None or self._target is None or self._given_up is None:
-            return
-        arrived = obs.last_outcome == PlanOutcome.REACHED and np.max(np.abs(here - self._goal)) <= 1
-        t = self._target
-        if not arrived or not obs.map.frontier[t[0], t[1], t[2]]:
-            return
-        key = (int(t[0]), int(t[1]), int(t[2]))
-        self._visits[key] = self._visits.get(key, 0) + 1
-        if self._visits[key] >= self.config.give_up_after:
-            r = self.config.give_up_radius_voxels
-            lo = np.maximum(t - r, 0)
-            hi = t + r + 1
-            self._given_up[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = True
-

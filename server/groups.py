@@ -66,7 +66,8 @@ class StatusCounts(BaseModel):
 
 class PlannerProgress(BaseModel):
     planner: str
-    jobs: list[int]
+    jobs: list[int] = Field(description="the jobs counted: a re-run stands in for the job it "
+                                        "re-runs")
     runs: int
     done: int = Field(description="runs in a final state")
     progress: float = Field(description="0-1, counting running runs by their progress")
@@ -175,8 +176,7 @@ def create_group(session: Session, settings: Settings, user: User, body: GroupCr
         for names, seconds in batches:
             made = create_job(session, settings, user, JobCreate(
                 planner=planner, areas=names, runs=body.runs, seconds=seconds,
-                preset=body.preset))
-            made.job.group_id = group.id
+                preset=body.preset), group_id=group.id)
             created.runs.extend(made.runs)
     session.flush()
     return created
@@ -192,9 +192,25 @@ def _counts(states: list[str]) -> StatusCounts:
     return StatusCounts(**{s: counted.get(s, 0) for s in STATES})
 
 
+def current_jobs(group: JobGroup) -> list[Job]:
+    """The group's jobs that no re-run in the group replaces: of a job and its re-runs (and
+    theirs), only the newest, in the place of the first. A re-run asks again for the same
+    planner, areas and seeds, so counting both would count those runs twice and keep an
+    earlier failure in the group's state after the re-run succeeded."""
+    by_id = {job.id: job for job in group.jobs}
+    newest: dict[int, Job] = {}  # first job's id -> its newest re-run (or itself)
+    for job in sorted(group.jobs, key=lambda j: j.id):
+        first = job
+        while first.rerun_of_id is not None and first.rerun_of_id in by_id:
+            first = by_id[first.rerun_of_id]
+        newest[first.id] = job  # ids grow: a later job of the line is a later re-run
+    return list(newest.values())
+
+
 def group_out(group: JobGroup) -> GroupOut:
+    current = current_jobs(group)
     by_planner: dict[str, list[Job]] = {}
-    for job in group.jobs:
+    for job in current:
         by_planner.setdefault(job.planner.key, []).append(job)
     planners = []
     for planner, jobs in by_planner.items():
@@ -206,7 +222,7 @@ def group_out(group: JobGroup) -> GroupOut:
             progress=round(progress / len(runs), 4) if runs else 1.0,
             by_status=_counts([r.status for r in runs]),
             simulated_s=sum(r.seconds for r in runs)))
-    runs = [r for j in group.jobs for r in j.runs]
+    runs = [r for j in current for r in j.runs]
     areas: list[str] = []
     for run in runs:
         if run.area.name not in areas:
@@ -217,14 +233,14 @@ def group_out(group: JobGroup) -> GroupOut:
     return GroupOut(
         id=group.id, name=group.name, owner=group.user.name, preset=group.preset,
         runs_per_area=group.runs_per_area, seconds=group.seconds, time_scale=group.time_scale,
-        areas=areas, created_at=group.created_at, status=_status(group),
+        areas=areas, created_at=group.created_at, status=_status(current),
         progress=round(progress, 4), runs=total, done=done,
         by_status=_counts([r.status for r in runs]), planners=planners)
 
 
-def _status(group: JobGroup) -> str:
-    """As a job's (`server.jobs.job_status`), over the group's jobs."""
-    states = [job_status(j)[0] for j in group.jobs]
+def _status(jobs: list[Job]) -> str:
+    """As a job's (`server.jobs.job_status`), over the group's current jobs."""
+    states = [job_status(j)[0] for j in jobs]
     if not states:
         return RunState.SUCCEEDED.value
     if all(RunState(s).final for s in states):

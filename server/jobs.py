@@ -49,7 +49,8 @@ def request_hash(body: JobCreate) -> str:
 
 
 def create_job(session: Session, settings: Settings, user: User, body: JobCreate, *,
-               idempotency_key: str | None = None, rerun_of: int | None = None) -> Created:
+               idempotency_key: str | None = None, rerun_of: int | None = None,
+               group_id: int | None = None) -> Created:
     digest = request_hash(body)
     if idempotency_key is not None:
         previous = session.scalar(select(Job).where(Job.user_id == user.id,
@@ -80,7 +81,7 @@ def create_job(session: Session, settings: Settings, user: User, body: JobCreate
     check_quotas(session, settings, user, n_runs)
     job = Job(user_id=user.id, planner_id=planner.id, preset=body.preset, seconds=body.seconds,
               runs_per_area=body.runs, idempotency_key=idempotency_key, request_hash=digest,
-              rerun_of_id=rerun_of)
+              rerun_of_id=rerun_of, group_id=group_id)
     session.add(job)
     session.flush()
     now = utcnow()
@@ -142,9 +143,11 @@ def cancel_job(session: Session, job: Job) -> None:
 
 
 def rerun_job(session: Session, settings: Settings, user: User, job: Job) -> Created:
+    """A new job with `job`'s request, in `job`'s group if it has one (where it stands in for
+    `job`: see `server.groups.current_jobs`)."""
     body = JobCreate(planner=job.planner.key, areas=_job_areas(job), runs=job.runs_per_area,
                      seconds=job.seconds, preset=job.preset)
-    return create_job(session, settings, user, body, rerun_of=job.id)
+    return create_job(session, settings, user, body, rerun_of=job.id, group_id=job.group_id)
 
 
 def _job_areas(job: Job) -> list[str]:
@@ -180,7 +183,7 @@ def job_out(job: Job) -> JobOut:
         id=job.id, status=status, progress=round(progress, 4), planner=job.planner.key,
         preset=job.preset, seconds=job.seconds, runs_per_area=job.runs_per_area,
         areas=_job_areas(job), owner=job.user.name, created_at=job.created_at,
-        rerun_of=job.rerun_of_id,
+        rerun_of=job.rerun_of_id, group_id=job.group_id,
         runs=[RunBrief(id=r.id, area=r.area.name, seed=r.seed, status=r.status,
                        progress=round(1.0 if RunState(r.status).final else r.progress, 4))
               for r in job.runs],

@@ -84,6 +84,8 @@ class JobOut(BaseModel):
     owner: str
     created_at: datetime
     rerun_of: int | None
+    group_id: int | None = Field(description="the job group (`/groups/{id}`) it belongs to, "
+                                 "if any; a re-run joins the group of the job it re-runs")
     runs: list[RunBrief]
 
 

@@ -6,16 +6,13 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Header, HTTPException, Query, Response
 from sqlalchemy import func, select
-from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, selectinload
 
 from server.deps import IdPath, SessionDep, SettingsDep, UserDep
-from server.groups import GroupCreate, GroupCreated, GroupOut, cancel_group, create_group, group_out
-from server.jobs import JobError
+from server.groups import GroupCreate, GroupOut, cancel_group, create_group, group_out
 from server.models import Job, JobGroup, Run, User
-from server.queue import enqueue_run
 from server.schemas import ErrorBody, Page
-from server.settings import Settings
+from server.submit import submit
 
 router = APIRouter(prefix="/groups", tags=["groups"])
 
@@ -36,16 +33,6 @@ def _load(session: Session, group_id: int) -> JobGroup:
     return group
 
 
-def _enqueue(settings: Settings, created: GroupCreated) -> None:
-    # After the commit, as for jobs: a run the broker did not take stays queued and the
-    # sweeper sends it again.
-    for run_id, seconds in created.runs:
-        try:
-            enqueue_run(settings, run_id, seconds)
-        except Exception:  # broker down: the sweeper re-enqueues queued runs
-            break
-
-
 @router.post("", status_code=201, response_model=GroupOut,
              responses={**_ERRORS, 409: {"model": ErrorBody}, 422: {"model": ErrorBody},
                         429: {"model": ErrorBody}})
@@ -58,25 +45,9 @@ def submit_group(
     idempotency_key: Annotated[str | None, Header(max_length=128)] = None,
 ) -> GroupOut:
     """One job per planner (every area, `runs` seeds each), stored in one transaction."""
-    try:
-        created = create_group(session, settings, user, body, idempotency_key=idempotency_key)
-        session.commit()
-    except JobError as exc:
-        session.rollback()
-        raise HTTPException(exc.status, str(exc)) from None
-    except IntegrityError:
-        # Two requests with one Idempotency-Key raced: the other one won; answer with its group.
-        session.rollback()
-        if idempotency_key is None:
-            raise
-        try:
-            created = create_group(session, settings, user, body,
-                                   idempotency_key=idempotency_key)
-        except JobError as exc:
-            raise HTTPException(exc.status, str(exc)) from None
-    if created.replayed:
-        response.headers["Idempotent-Replayed"] = "true"
-    _enqueue(settings, created)
+    created = submit(session, settings, lambda: create_group(
+        session, settings, user, body, idempotency_key=idempotency_key),
+        idempotency_key=idempotency_key, response=response)
     return group_out(_load(session, created.group.id))
 
 

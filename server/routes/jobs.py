@@ -6,23 +6,13 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Header, HTTPException, Query, Response
 from sqlalchemy import func, select
-from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import selectinload
 
 from server.deps import IdPath, SessionDep, SettingsDep, UserDep
-from server.jobs import (
-    Created,
-    JobError,
-    cancel_job,
-    create_job,
-    job_out,
-    may_manage,
-    rerun_job,
-)
+from server.jobs import cancel_job, create_job, job_out, may_manage, rerun_job
 from server.models import AreaRow, Job, PlannerRow, Run, User
-from server.queue import enqueue_run
 from server.schemas import ErrorBody, JobCreate, JobOut, Page
-from server.settings import Settings
+from server.submit import submit
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
 
@@ -41,16 +31,6 @@ def _load(session: SessionDep, job_id: int) -> Job:
     return job
 
 
-def _enqueue(settings: Settings, created: Created) -> None:
-    # After the commit: a worker must find the run rows. A failed enqueue is repaired by the
-    # sweeper, which re-enqueues runs that stay queued.
-    for run_id, seconds in created.runs:
-        try:
-            enqueue_run(settings, run_id, seconds)
-        except Exception:  # broker down: the run stays queued and is swept later
-            break
-
-
 @router.post("", status_code=201, response_model=JobOut,
              responses={**_ERRORS, 409: {"model": ErrorBody}, 422: {"model": ErrorBody},
                         429: {"model": ErrorBody}})
@@ -62,24 +42,9 @@ def submit_job(
     response: Response,
     idempotency_key: Annotated[str | None, Header(max_length=128)] = None,
 ) -> JobOut:
-    try:
-        created = create_job(session, settings, user, body, idempotency_key=idempotency_key)
-        session.commit()
-    except JobError as exc:
-        session.rollback()
-        raise HTTPException(exc.status, str(exc)) from None
-    except IntegrityError:
-        # Two requests with one Idempotency-Key raced: the other one won; answer with its job.
-        session.rollback()
-        if idempotency_key is None:
-            raise
-        try:
-            created = create_job(session, settings, user, body, idempotency_key=idempotency_key)
-        except JobError as exc:
-            raise HTTPException(exc.status, str(exc)) from None
-    if created.replayed:
-        response.headers["Idempotent-Replayed"] = "true"
-    _enqueue(settings, created)
+    created = submit(session, settings, lambda: create_job(
+        session, settings, user, body, idempotency_key=idempotency_key),
+        idempotency_key=idempotency_key, response=response)
     return job_out(_load(session, created.job.id))
 
 
@@ -136,11 +101,5 @@ def rerun(job_id: IdPath, session: SessionDep, settings: SettingsDep,
     job = _load(session, job_id)
     if not may_manage(user, job):
         raise HTTPException(403, "only the job's owner or an admin may re-run it")
-    try:
-        created = rerun_job(session, settings, user, job)
-        session.commit()
-    except JobError as exc:
-        session.rollback()
-        raise HTTPException(exc.status, str(exc)) from None
-    _enqueue(settings, created)
+    created = submit(session, settings, lambda: rerun_job(session, settings, user, job))
     return job_out(_load(session, created.job.id))

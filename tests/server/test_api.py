@@ -160,8 +160,23 @@ def test_rerun_makes_a_new_job_and_keeps_the_old(client: TestClient, tokens: Any
     assert again.status_code == 201
     new = again.json()
     assert new["id"] != job["id"] and new["rerun_of"] == job["id"]
+    assert new["group_id"] is None  # a re-run of a job outside any group stays outside
     assert new["status"] == "queued" and len(new["runs"]) == 2 and new["seconds"] == 30
     assert client.get(f"/api/v1/jobs/{job['id']}").json()["status"] == "cancelled"
+
+
+def test_a_job_shows_its_group(client: TestClient, tokens: Any) -> None:
+    plain = _submit(client, tokens.auth("alice"))
+    assert plain.status_code == 201 and plain.json()["group_id"] is None
+    group = client.post("/api/v1/groups", headers=tokens.auth("alice"), json={
+        "planners": ["classic"], "areas": ["maze"], "runs": 1, "seconds": 30}).json()
+    grouped_id = group["planners"][0]["jobs"][0]
+    grouped = client.get(f"/api/v1/jobs/{grouped_id}").json()
+    assert grouped["group_id"] == group["id"] and grouped["planner"] == "classic-v1"
+    assert client.get(f"/api/v1/jobs/{plain.json()['id']}").json()["group_id"] is None
+    listed = client.get("/api/v1/jobs").json()["items"]
+    assert {j["id"]: j["group_id"] for j in listed} == {grouped_id: group["id"],
+                                                        plain.json()["id"]: None}
 
 
 def test_run_log_is_private(client: TestClient, tokens: Any) -> None:

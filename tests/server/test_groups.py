@@ -172,6 +172,63 @@ def test_progress_and_cancel(client: TestClient, tokens: Any,
         assert s.scalar(select(Run.cancel_requested).where(Run.id == second)) is True
 
 
+def _finish(sessions: sessionmaker[Session], job_id: int, *states: RunState) -> None:
+    """End the job's runs, in id order, in `states`."""
+    with sessions() as s:
+        ids = s.scalars(select(Run.id).where(Run.job_id == job_id).order_by(Run.id)).all()
+        for run_id, state in zip(ids, states, strict=True):
+            s.execute(update(Run).where(Run.id == run_id).values(status=state.value,
+                                                                 progress=1.0))
+        s.commit()
+
+
+def test_a_rerun_joins_the_group_in_place_of_the_job(client: TestClient, tokens: Any,
+                                                     sessions: sessionmaker[Session],
+                                                     settings: Settings) -> None:
+    group = _submit(client, tokens.auth("alice")).json()
+    classic_job, rapid_job = (p["jobs"][0] for p in group["planners"])
+    _finish(sessions, classic_job, RunState.FAILED, RunState.SUCCEEDED)
+    _finish(sessions, rapid_job, RunState.SUCCEEDED, RunState.SUCCEEDED)
+    before = client.get(f"/api/v1/groups/{group['id']}").json()
+    assert before["status"] == "failed" and before["done"] == 4 and before["progress"] == 1
+
+    response = client.post(f"/api/v1/jobs/{classic_job}/rerun", headers=tokens.auth("alice"))
+    assert response.status_code == 201, response.text
+    rerun = response.json()
+    assert rerun["group_id"] == group["id"] and rerun["rerun_of"] == classic_job
+    assert len(list((settings.broker_folder / "queue").iterdir())) == 4 + 2
+    # The old job keeps its group and its runs; the group counts the re-run instead of it.
+    old = client.get(f"/api/v1/jobs/{classic_job}").json()
+    assert old["group_id"] == group["id"] and old["status"] == "failed"
+    shown = client.get(f"/api/v1/groups/{group['id']}").json()
+    assert [(p["planner"], p["jobs"]) for p in shown["planners"]] == [
+        ("classic-v1", [rerun["id"]]), ("rapid-v1", [rapid_job])]
+    assert shown["runs"] == 4 and shown["done"] == 2 and shown["status"] == "running"
+    assert shown["by_status"] == {"queued": 2, "running": 0, "succeeded": 2, "failed": 0,
+                                  "cancelled": 0}
+    assert shown["progress"] == 0.5 and shown["planners"][0]["simulated_s"] == 60
+    assert client.get("/api/v1/groups").json()["items"][0]["runs"] == 4
+
+    _finish(sessions, rerun["id"], RunState.SUCCEEDED, RunState.SUCCEEDED)
+    after = client.get(f"/api/v1/groups/{group['id']}").json()
+    assert after["status"] == "succeeded" and after["done"] == 4 and after["progress"] == 1
+    assert after["by_status"]["succeeded"] == 4 and after["by_status"]["failed"] == 0
+
+    # A re-run of the re-run, and a second re-run of the first job: still one job of the line
+    # counted, the newest.
+    again = client.post(f"/api/v1/jobs/{rerun['id']}/rerun", headers=tokens.auth("alice"))
+    third = client.post(f"/api/v1/jobs/{classic_job}/rerun", headers=tokens.auth("alice"))
+    assert again.json()["group_id"] == third.json()["group_id"] == group["id"]
+    shown = client.get(f"/api/v1/groups/{group['id']}").json()
+    assert [p["jobs"] for p in shown["planners"]] == [[third.json()["id"]], [rapid_job]]
+    assert shown["runs"] == 4 and shown["by_status"]["queued"] == 2
+    # Cancelling the group reaches every job in it, replaced ones included.
+    cancelled = client.post(f"/api/v1/groups/{group['id']}/cancel",
+                            headers=tokens.auth("alice")).json()
+    assert cancelled["by_status"]["cancelled"] == 2
+    assert client.get(f"/api/v1/jobs/{again.json()['id']}").json()["status"] == "cancelled"
+
+
 def test_flybo_benchmark_against_a_real_service(tmp_path: Path) -> None:
     """`flybo benchmark` end to end: `flybo serve` with one real worker, one planner x one
     area x one run of a few simulated seconds; then Ctrl-C while waiting leaves a group
