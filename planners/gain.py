@@ -12,6 +12,7 @@ the columns inside the horizontal field of view centred on it.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numba
 import numpy as np
@@ -124,6 +125,10 @@ class GainEvaluator:
         max_range_m: gain range; the camera's range when None.
     """
 
+    # What closed surface gaps are filled with for this gain's rays
+    # (`planners.surface_gaps`): for unknown volume, an occupied voxel is just a stop.
+    gap_fill: ClassVar[int] = VoxelState.OCCUPIED
+
     def __init__(self, camera: CameraConfig, angle_step_deg: float, step_m: float,
                  max_range_m: float | None = None) -> None:
         self.camera = camera
@@ -172,6 +177,7 @@ class GainEvaluator:
         """Gain (m³) of the pose (position, yaw)."""
         return self.at_yaw(self.columns(view, position), yaw)
 
-    def best_view(self, view: MapView, position: npt.ArrayLike) -> ViewGain:
-        """Best yaw and its gain at `position`."""
-        return self.best(self.columns(view, position))
+    def best_view(self, view: MapView, position: npt.ArrayLike,
+                  state: npt.NDArray[np.uint8] | None = None) -> ViewGain:
+        """Best yaw and its gain at `position`; `state` as in `columns`."""
+        return self.best(self.columns(view, position, state))

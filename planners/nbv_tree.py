@@ -13,9 +13,8 @@ until the tree has `min_nodes` nodes (N_init) and some branch is worth more than
 iteration's best branch, less its flown first edge, seeds the new tree so that a good plan is
 not lost to sampling.
 
-`close_surface_gaps` closes narrow gaps in the map's occupied surfaces for the gain's rays
-(NBVP: the unknown interior of walls seen through holes in their occupied layer would otherwise
-keep a gain that no flight can reduce, see `planners.nbvp`).
+The gain may be cast through a copy of the map with narrow gaps in its occupied surfaces
+closed (`planners.surface_gaps`, NBVP's `surface_gap_m`).
 """
 
 from __future__ import annotations
@@ -31,7 +30,6 @@ from planners.gain import GainEvaluator
 from planners.lines import segment_clear_world
 from planners.rrt import Tree, extend
 from sim.map_view import MapView
-from sim.occupancy import VoxelState
 
 FloatArray = npt.NDArray[np.float64]
 StateGrid = npt.NDArray[np.uint8]
@@ -162,30 +160,3 @@ def grow_tree(
     tree.values[:] = values
     best_value = float(values[best])
     return TreeOutcome(tree, best, best_value, best_value > settings.zero_gain, stalled)
-
-
-def close_surface_gaps(state: StateGrid, gap_voxels: int) -> StateGrid:
-    """(nx, ny, nz) states with every voxel that lies, along some axis, between two occupied
-    voxels at most `gap_voxels` + 1 apart made occupied: holes that grazing rays sweep in a
-    surface's occupied layer, and the unknown interior of walls at most `gap_voxels` thick."""
-    occupied = state == VoxelState.OCCUPIED
-    fill = np.zeros_like(occupied)
-    for axis in range(3):
-        n = state.shape[axis]
-        below = np.zeros_like(occupied)  # an occupied voxel 1..d below, for growing d
-        for d in range(1, gap_voxels + 1):
-            shifted = np.zeros_like(occupied)
-            dst = [slice(None)] * 3
-            src = [slice(None)] * 3
-            dst[axis], src[axis] = slice(d, n), slice(0, n - d)
-            shifted[tuple(dst)] = occupied[tuple(src)]
-            below |= shifted
-            # occupied exactly (gap_voxels + 1 - d) above pairs with anything 1..d below
-            up = gap_voxels + 1 - d
-            above = np.zeros_like(occupied)
-            dst[axis], src[axis] = slice(0, n - up), slice(up, n)
-            above[tuple(dst)] = occupied[tuple(src)]
-            fill |= below & above
-    closed = state.copy()
-    closed[fill] = VoxelState.OCCUPIED
-    return closed

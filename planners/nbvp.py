@@ -34,10 +34,10 @@ from planners.nbv_tree import (
     StateGrid,
     TreeOutcome,
     TreeSettings,
-    close_surface_gaps,
     grow_tree,
 )
 from planners.search import shortcut
+from planners.surface_gaps import close_surface_gaps
 from planners.waypoints import nearest_traversable, path_waypoints, tree_root
 
 FloatArray = npt.NDArray[np.float64]

@@ -29,6 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from planners.gain import FloatArray, GainEvaluator
+from planners.surface_gaps import CLOSED_GAP
 from sim.camera import CameraConfig
 from sim.map_view import MapView
 from sim.occupancy import VoxelState
@@ -37,6 +38,7 @@ ByteGrid = npt.NDArray[np.uint8]
 
 _UNKNOWN = np.uint8(VoxelState.UNKNOWN)
 _OCCUPIED = np.uint8(VoxelState.OCCUPIED)
+_CLOSED_GAP = CLOSED_GAP
 _SECTORS = 8
 
 
@@ -92,6 +94,8 @@ def _recon_column_gains(
                 if i < 0 or j < 0 or k < 0 or i >= nx or j >= ny or k >= nz:
                     break
                 v = state[i, j, k]
+                if v == _CLOSED_GAP:
+                    break
                 if v == _OCCUPIED:
                     impact = new_weight / (new_weight + float(weight[i, j, k]))
                     worth = surface_weight * impact if impact >= min_impact else 0.0
@@ -123,6 +127,9 @@ class ReconGainEvaluator(GainEvaluator):
         min_directions: a surface voxel seen from at least this many sectors earns no
             direction bonus.
     """
+
+    # A closed gap stops a ray with no worth: it is no surface a view could reconstruct.
+    gap_fill = int(CLOSED_GAP)
 
     def __init__(self, camera: CameraConfig, angle_step_deg: float, step_m: float,
                  max_range_m: float | None = None, *, unknown_weight: float = 1.0,

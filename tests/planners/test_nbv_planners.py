@@ -9,9 +9,10 @@ import pytest
 
 from planners.aep import Aep, AepConfig
 from planners.gain import GainEvaluator
-from planners.nbv_tree import TreeSettings, close_surface_gaps, grow_tree
+from planners.nbv_tree import TreeSettings, grow_tree
 from planners.nbvp import Nbvp, NbvpConfig
 from planners.registry import make
+from planners.surface_gaps import close_surface_gaps
 from sim.camera import CameraConfig
 from sim.geometry import Pose
 from sim.interface import Observation, PlannerContext, PlanOutcome
