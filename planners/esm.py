@@ -2,12 +2,14 @@
 
 One tree of straight trajectory segments, rooted at the vehicle, persists for the whole
 exploration and grows at every planning call (the paper expands it continuously while flying):
-samples are drawn around the root until it has `local_count` nodes within `local_radius_m`, then
-uniformly in the area; each is steered at most `extension_m` from its nearest node, kept only in
-traversable space and at least `density_radius_m` from every node, and gets the gain of its view
-at its best yaw. It is inserted RRT*-style (`planners.segment_tree`): the parent that maximises
-its value, then nearby nodes re-hung under it where that raises their value. Every segment is
-checked against `traversable` again at each call; blocked ones are dropped with their subtrees.
+as many samples as the root lacks nodes within `local_radius_m` (of `local_count`) are drawn on
+that sphere, the rest uniformly in the map's traversable space (`global_sampling`; the paper: in
+the area's box); each is steered at most `extension_m` from the first of its `steer_candidates`
+nearest nodes that gives a segment, kept only in traversable space and at least
+`density_radius_m` from every node, and gets the gain of its view at its best yaw. It is
+inserted RRT*-style (`planners.segment_tree`): the parent that maximises its value, then nearby
+nodes re-hung under it where that raises their value. Every segment is checked against
+`traversable` again at each call; blocked ones are reconnected or dropped with their subtrees.
 
 A node's value is the best gain per second of flight of any branch through it (the paper's
 normalized gain: sum of gains / sum of segment flight times from the root, maximised over the
@@ -84,6 +86,16 @@ class EsmConfig(PlannerConfig):
     crop_margin_m: float = Field(0.3, ge=0.0)
     # ... and kept if at least this long (crop_min_length: 0.5)
     crop_min_m: float = Field(0.5, gt=0.0)
+    # Where samples beyond the semilocal ones are drawn: "box", uniformly in the area (the
+    # paper's), or "traversable", uniformly among the map's traversable voxels (our choice). A
+    # sample in unknown space can only pull the nearest node up to the known boundary, where it
+    # is cropped; on MAZE such samples, two thirds of the box early on, left the tree stuck at
+    # the mouth of narrow known corridors (traced: ESM-Recon seed 33, 0.557 at 700 s).
+    global_sampling: Literal["box", "traversable"] = "traversable"
+    # Our choice: a sample is steered from up to this many nearest nodes, nearest first, until
+    # one gives a segment (the paper: the nearest only). In a corridor that bends away from the
+    # nearest node, the nearest node's way is blocked and the next one's is clear.
+    steer_candidates: int = Field(4, ge=1)
     # Our choice: the paper expands while flying; here each call samples this many points ...
     tries_per_call: int = Field(300, ge=1)
     # ... and stops after this many new segments, to bound the time charged per call.
@@ -232,11 +244,13 @@ class Esm(Planner):
                 tree.keep(keep)
             return tree
         # Back-tracked or stopped short: hang the tree from the vehicle through the nearest
-        # node with a clear segment, reversing the way from it to the old root.
-        near = tree.near(root, cfg.rewire_radius_m, cfg.neighbours)
-        if len(near):
-            near = near[self._clear(np.repeat(root[None], len(near), axis=0),
-                                    tree.positions[near])]
+        # node with a clear segment, reversing the way from it to the old root. Any distance
+        # will do (our choice; a segment's flight time prices its length): limited to
+        # `rewire_radius_m`, a back-tracked vehicle often found no node and the whole tree,
+        # with the branches toward unexplored space, was thrown away.
+        order = np.argsort(np.sum((tree.positions - root) ** 2, axis=1), kind="stable")
+        clear = self._clear(np.repeat(root[None], len(order), axis=0), tree.positions[order])
+        near = order[clear]
         if len(near) == 0:
             self._tree = SegmentTree(root, yaw)
             return self._tree
@@ -274,22 +288,31 @@ class Esm(Planner):
         local_missing = cfg.local_count - (int(np.count_nonzero(d_root <= cfg.local_radius_m))
                                            - 1)
         added = 0
+        traversable: npt.NDArray[np.intp] | None = None  # flat ids, drawn from on first use
         for _ in range(cfg.tries_per_call):
             if added >= cfg.new_per_call:
                 break
             if local_missing > 0:
-                # Semilocal sampling: a point on the sphere of `local_radius_m` round the root.
+                # Semilocal sampling: a point on the sphere of `local_radius_m` round the root,
+                # at most as many as local nodes are missing, kept or not (as the paper's
+                # sampler counts them), so that a root in a corridor too narrow to hold
+                # `local_count` nodes does not starve the global samples.
+                local_missing -= 1
                 direction = rng.normal(size=3)
                 direction /= max(float(np.linalg.norm(direction)), 1e-12)
                 sample = root + cfg.local_radius_m * direction
+            elif cfg.global_sampling == "traversable":
+                if traversable is None:
+                    traversable = np.flatnonzero(view.traversable)
+                    if len(traversable) == 0:
+                        break
+                voxel = np.array(np.unravel_index(int(rng.choice(traversable)), view.shape))
+                sample = view.index_to_world(voxel[None])[0] + \
+                    rng.uniform(-0.5, 0.5, 3) * view.voxel_size
             else:
                 sample = rng.uniform(ctx.bounds_min, ctx.bounds_max)
-            nearest = tree.nearest(sample)
-            new = self._crop(view, tree.positions[nearest], sample)
+            new = self._steer(tree, view, sample)
             if new is None:
-                continue
-            if float(np.min(np.sum((tree.positions - new) ** 2, axis=1))) < \
-                    cfg.density_radius_m ** 2:
                 continue
             yaw, gain = self._evaluate(view, new)
             node = insert(tree, new, yaw, gain, obs.time, self._clear, self._flight,
@@ -297,9 +320,24 @@ class Esm(Planner):
             if node < 0:
                 continue
             added += 1
-            if np.linalg.norm(new - root) <= cfg.local_radius_m + 1e-9:
-                local_missing -= 1
         return added
+
+    def _steer(self, tree: SegmentTree, view: MapView, sample: FloatArray) -> FloatArray | None:
+        """A new node position toward `sample` from the first of its `steer_candidates`
+        nearest nodes that gives one (`_crop`) at least `density_radius_m` from every node."""
+        cfg = self.config
+        d2 = np.sum((tree.positions - sample) ** 2, axis=1)
+        count = min(cfg.steer_candidates, tree.size)
+        nearest = np.argpartition(d2, count - 1)[:count] if count < tree.size else \
+            np.arange(tree.size)
+        for node in nearest[np.argsort(d2[nearest], kind="stable")]:
+            new = self._crop(view, tree.positions[node], sample)
+            if new is None:
+                continue
+            if float(np.min(np.sum((tree.positions - new) ** 2, axis=1))) >= \
+                    cfg.density_radius_m ** 2:
+                return new
+        return None
 
     def _crop(self, view: MapView, start: FloatArray, sample: FloatArray) -> FloatArray | None:
         """The point `extension_m` from `start` toward `sample`, or, where the way is blocked

@@ -308,3 +308,50 @@ def test_tree_persists_and_is_rerooted_at_the_flown_segment(name: str) -> None:
     assert tree.size >= size - 1  # at most the old root dropped, if it had nothing left
     assert plan2.info["mode"] in ("tree", "back")
     assert spec(name).version == 1
+
+
+def _corridor() -> np.ndarray:
+    """A known free corridor along x, 1.3 m wide and 2 m high, walls round it, unknown
+    elsewhere: the traversable part (0.45 m safety radius) is 0.4 m wide, so a sphere of
+    `local_radius_m` round a node in it holds only a few nodes `density_radius_m` apart."""
+    state = np.zeros(SHAPE, dtype=np.uint8)
+    state[:, 13:28, 2:23] = VoxelState.OCCUPIED
+    state[:, 14:27, 3:22] = VoxelState.FREE
+    return state
+
+
+@pytest.mark.parametrize("sampling", ["box", "traversable"])
+def test_a_root_in_a_narrow_corridor_does_not_starve_the_global_samples(sampling: str) -> None:
+    """The corridor cannot hold `local_count` nodes near the root; semilocal samples are
+    counted as drawn, not as kept, so the rest of the tries are global and the tree grows along
+    the corridor (drawing semilocal samples until enough were kept, it stayed within 1.5 m)."""
+    view = stack_from_state(_corridor(), VOXEL, 0.45).view()
+    start = np.array([0.55, 2.05, 1.25])
+    planner = make("esm-ipp", {"global_sampling": sampling})
+    assert isinstance(planner, Esm)
+    planner.reset(_context())
+    planner.plan(Observation(0.0, Pose(start.copy(), 0.0), np.zeros(3), view, PlanOutcome.NONE))
+    tree = planner.tree
+    assert tree is not None
+    reach = np.linalg.norm(tree.positions - start, axis=1)
+    assert np.count_nonzero(reach <= EsmConfig().local_radius_m) < EsmConfig().local_count
+    assert reach.max() > 3.0
+    assert np.all(view.traversable[tuple(view.world_to_index(tree.positions).T)])
+
+
+def test_a_sample_is_steered_from_the_next_nearest_node_when_the_nearest_is_walled_off() -> None:
+    """Two nodes: the nearest to the sample behind a wall, the next one in the open."""
+    state = np.full(SHAPE, VoxelState.FREE, dtype=np.uint8)
+    state[:, 20, :] = VoxelState.OCCUPIED  # a wall at y = 2.0-2.1 m
+    view = stack_from_state(state, VOXEL, 0.45).view()
+    sample = np.array([4.0, 1.0, 1.25])
+    for candidates, steered in ((1, False), (2, True)):
+        planner = make("esm-ipp", {"steer_candidates": candidates})
+        assert isinstance(planner, Esm)
+        planner.reset(_context())
+        tree = SegmentTree(np.array([3.6, 2.9, 1.25]))  # nearest, across the wall
+        tree.add(np.array([1.5, 1.0, 1.25]), tree.root, 0.0, 1.0)  # next nearest, in the open
+        new = planner._steer(tree, view, sample)
+        assert (new is not None) == steered
+        if new is not None:
+            np.testing.assert_allclose(new, [3.0, 1.0, 1.25], atol=1e-9)
