@@ -46,7 +46,6 @@ from planners.gain import GainEvaluator
 from planners.lines import reachable_lengths, segment_clear_world, segments_clear
 from planners.recon_gain import ReconGainEvaluator
 from planners.rrt import steer
-from planners.search import shortcut
 from planners.segment_tree import (
     BoolArray,
     FlightTime,
@@ -56,7 +55,7 @@ from planners.segment_tree import (
     rewire,
 )
 from planners.surface_gaps import StateGrid, close_surface_gaps
-from planners.waypoints import nearest_traversable, path_waypoints, tree_root
+from planners.waypoints import grid_path, path_waypoints, tree_root
 from sim.map_view import MapView
 
 FloatArray = npt.NDArray[np.float64]
@@ -421,14 +420,10 @@ class Esm(Planner):
             if np.linalg.norm(heading[:2]) > 1e-6:
                 yaw = float(np.arctan2(heading[1], heading[0]))
             return np.array([[*target, yaw]])
-        start = nearest_traversable(view.traversable, view.world_to_index(here[None])[0])
-        goal = nearest_traversable(view.traversable, view.world_to_index(target[None])[0])
-        if start is None or goal is None or np.array_equal(start, goal):
+        found = grid_path(view, self._paths, here, target)
+        if found is None:
             return None
-        path, _ = self._paths.path(view.traversable, start, goal, view.voxel_size)
-        if len(path) < 2:
-            return None
-        path = shortcut(path, view.traversable)
+        path, goal = found
         look = view.index_to_world(goal[None])[0] + 2.0 * (target - here)
         waypoints: FloatArray = path_waypoints(view, path, obs.pose.position, look)
         return waypoints

@@ -36,9 +36,8 @@ from planners.nbv_tree import (
     TreeSettings,
     grow_tree,
 )
-from planners.search import shortcut
 from planners.surface_gaps import close_surface_gaps
-from planners.waypoints import nearest_traversable, path_waypoints, tree_root
+from planners.waypoints import grid_path, path_waypoints, tree_root
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -232,15 +231,10 @@ class Nbvp(Planner):
                  yaw: float | None = None) -> FloatArray | None:
         """(N, 4) waypoints of a shortest grid path to `target`, or None if unreachable."""
         view = obs.map
-        here = view.world_to_index(np.asarray(obs.pose.position)[None])[0]
-        start = nearest_traversable(view.traversable, here)
-        goal = nearest_traversable(view.traversable, view.world_to_index(target[None])[0])
-        if start is None or goal is None or np.array_equal(start, goal):
+        found = grid_path(view, self._paths, obs.pose.position, target)
+        if found is None:
             return None
-        path, _ = self._paths.path(view.traversable, start, goal, view.voxel_size)
-        if len(path) < 2:
-            return None
-        path = shortcut(path, view.traversable)
+        path, goal = found
         look = target if yaw is None else view.index_to_world(goal[None])[0] + np.array(
             [np.cos(yaw), np.sin(yaw), 0.0])
         waypoints: FloatArray = path_waypoints(view, path, obs.pose.position, look)

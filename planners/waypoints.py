@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from planners.search import BoolGrid, IndexArray, segment_clear
+from planners.astar import PathCache
+from planners.search import BoolGrid, IndexArray, segment_clear, shortcut
 from sim.map_view import MapView
 
 
@@ -43,6 +44,25 @@ def tree_root(view: MapView,
     if np.array_equal(start, voxel):
         return here.copy(), False
     return view.index_to_world(start[None])[0], True
+
+
+def grid_path(view: MapView, paths: PathCache, position: npt.ArrayLike,
+              target: npt.ArrayLike) -> tuple[IndexArray, IndexArray] | None:
+    """A shortest 26-connected path through traversable voxels, shortcut, from the vehicle at
+    `position` to `target` (world (3,) each, snapped to the nearest traversable voxels), and its
+    goal voxel; None when either has no traversable voxel near, both snap to one voxel, or no
+    path joins them."""
+    def snap(point: npt.ArrayLike) -> IndexArray | None:
+        voxel = view.world_to_index(np.asarray(point, dtype=np.float64)[None])[0]
+        return nearest_traversable(view.traversable, voxel)
+
+    start, goal = snap(position), snap(target)
+    if start is None or goal is None or np.array_equal(start, goal):
+        return None
+    path, _ = paths.path(view.traversable, start, goal, view.voxel_size)
+    if len(path) < 2:
+        return None
+    return shortcut(path, view.traversable), goal
 
 
 def path_waypoints(

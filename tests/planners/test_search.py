@@ -11,8 +11,11 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
+from planners.astar import PathCache
 from planners.search import DistanceField, segment_clear, shortcut
-from planners.waypoints import nearest_traversable
+from planners.waypoints import grid_path, nearest_traversable
+from sim.occupancy import VoxelState
+from tests.planners.conftest import stack_from_state
 
 BoolGrid = npt.NDArray[np.bool_]
 VOXEL = 0.1
@@ -386,3 +389,29 @@ def test_searches_in_a_row_do_not_see_each_other() -> None:
             assert_chain(early.path_to(goal), passable, start, goal)
         for voxel in np.argwhere(passable)[::37]:
             assert full.distance_to(voxel) == pytest.approx(reference[tuple(voxel)])
+
+
+def test_grid_path_snaps_both_ends_and_goes_round_a_wall() -> None:
+    """From a vehicle beside a wall to a target just across it, both within the wall's safety
+    margin: both ends snap to traversable voxels, the shortcut path goes through the wall's gap,
+    and the goal voxel is returned; one shared voxel or no way through gives None."""
+    state = np.full((40, 30, 10), VoxelState.FREE, dtype=np.uint8)
+    state[20, :, :] = VoxelState.OCCUPIED
+    state[20, 24:28, :] = VoxelState.FREE  # the only gap, at y = 2.4-2.8 m
+    view = stack_from_state(state, 0.1, 0.15).view()
+    here, there = np.array([1.95, 0.55, 0.55]), np.array([2.15, 0.55, 0.55])
+    assert not view.traversable[19, 5, 5] and not view.traversable[21, 5, 5]
+    found = grid_path(view, PathCache(), here, there)
+    assert found is not None
+    path, goal = found
+    assert path[0][0] < 19 and goal[0] > 21  # snapped away from the wall, on either side
+    np.testing.assert_array_equal(path[-1], goal)
+    assert np.all(view.traversable[tuple(path.T)])
+    assert path[:, 1].max() >= 24  # up to the gap: the straight way is walled
+    for a, b in itertools.pairwise(path):  # and every leg clear
+        assert segment_clear(view.traversable, a + 0.5, b + 0.5)
+    assert grid_path(view, PathCache(), np.array([0.55, 0.55, 0.55]),
+                     np.array([0.56, 0.56, 0.55])) is None  # one voxel
+    state[20, 24:28, :] = VoxelState.OCCUPIED
+    closed = stack_from_state(state, 0.1, 0.15).view()
+    assert grid_path(closed, PathCache(), here, there) is None
