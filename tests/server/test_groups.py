@@ -264,9 +264,17 @@ def test_flybo_benchmark_against_a_real_service(tmp_path: Path) -> None:
                                  env=env, capture_output=True, text=True, timeout=60)
         assert refused.returncode == 2 and "classic-v1" in refused.stderr
 
-        waiting = subprocess.Popen([*flybo, "--planners", "classic", "--areas", "maze",
-                                    "--runs", "1", "--seconds", "600"], env=env,
-                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        # Ctrl-C as from a user's terminal. A test run started in the background ignores
+        # SIGINT, and a child inherits an ignored signal across exec; a handler of ours is
+        # reset to the default there instead.
+        previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+        try:
+            waiting = subprocess.Popen([*flybo, "--planners", "classic", "--areas", "maze",
+                                        "--runs", "1", "--seconds", "600"], env=env,
+                                       stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                       text=True)
+        finally:
+            signal.signal(signal.SIGINT, previous)
         deadline = time.monotonic() + 60
         while httpx.get(f"{base}/api/v1/groups").json()["total"] < 2:
             assert time.monotonic() < deadline and waiting.poll() is None, _tail(logs)
