@@ -22,6 +22,7 @@ from planners.search import (
     _corner_free,
     _heap_pop,
     _heap_push,
+    _workspace,
 )
 
 _SQRT2 = float(np.sqrt(2.0))
@@ -46,13 +47,18 @@ def _astar(
     goal: IndexArray,
     offsets: IndexArray,
     step_cost: npt.NDArray[np.float64],
-) -> tuple[IndexArray, float]:
-    """(K, 3) voxel path start → goal and its length in voxels; (0, 3) and inf if none."""
+    g: npt.NDArray[np.float64],
+    parent: npt.NDArray[np.int64],
+    done: npt.NDArray[np.bool_],
+    touched: npt.NDArray[np.int64],
+) -> tuple[IndexArray, float, npt.NDArray[np.int64], int]:
+    """(K, 3) voxel path start → goal and its length in voxels; (0, 3) and inf if none.
+
+    `g`, `parent` and `done` are clean flat workspaces (inf, -1, False), as for
+    `planners.search._dijkstra`; every voxel given a cost is listed in `touched` (returned,
+    grown when full, with the count) for the caller to clean.
+    """
     nx, ny, nz = passable.shape
-    n_total = passable.size
-    g = np.full(n_total, np.inf, dtype=np.float64)
-    parent = np.full(n_total, -1, dtype=np.int64)
-    done = np.zeros(n_total, dtype=np.bool_)
     flat = passable.ravel()
     keys = np.empty(1 << 14, dtype=np.float64)
     vals = np.empty(1 << 14, dtype=np.int64)
@@ -60,6 +66,8 @@ def _astar(
     s = (start[0] * ny + start[1]) * nz + start[2]
     target = (gi * ny + gj) * nz + gk
     g[s] = 0.0
+    touched[0] = s
+    n_touched = 1
     size = _heap_push(keys, vals, 0, _octile(start[0], start[1], start[2], gi, gj, gk), s)
     found = False
     while size > 0:
@@ -87,6 +95,11 @@ def _astar(
                 continue
             ng = g[cur] + step_cost[n]
             if ng < g[idx]:
+                if g[idx] == np.inf:
+                    if n_touched == touched.shape[0]:
+                        touched = np.concatenate((touched, np.empty_like(touched)))
+                    touched[n_touched] = idx
+                    n_touched += 1
                 g[idx] = ng
                 parent[idx] = cur
                 if size == keys.shape[0]:
@@ -94,7 +107,7 @@ def _astar(
                     vals = np.concatenate((vals, np.empty_like(vals)))
                 size = _heap_push(keys, vals, size, ng + _octile(i, j, k, gi, gj, gk), idx)
     if not found:
-        return np.zeros((0, 3), dtype=np.int64), np.inf
+        return np.zeros((0, 3), dtype=np.int64), np.inf, touched, n_touched
     count = 1
     p = target
     while parent[p] >= 0:
@@ -107,7 +120,7 @@ def _astar(
         path[r, 1] = (p // nz) % ny
         path[r, 2] = p % nz
         p = parent[p]
-    return path, g[target]
+    return path, g[target], touched, n_touched
 
 
 @numba.njit(cache=True)
@@ -139,7 +152,11 @@ def astar(passable: BoolGrid, start: npt.ArrayLike, goal: npt.ArrayLike,
             raise ValueError(f"{name} {v.tolist()} is outside the grid {passable.shape}")
     if not (passable[tuple(s)] and passable[tuple(t)]):
         return np.zeros((0, 3), dtype=np.int64), np.inf
-    path, cost = _astar(passable, s, t, _OFFSETS, _STEP_COST)
+    # Reused clean buffers: a search costs what it visits, not three grid-sized allocations.
+    ws = _workspace(int(passable.size))
+    path, cost, ws.touched, count = _astar(passable, s, t, _OFFSETS, _STEP_COST, ws.dist,
+                                           ws.parent, ws.done, ws.touched)
+    ws.clean(ws.touched[:count])
     return path, float(cost) * voxel_size
 
 

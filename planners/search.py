@@ -162,6 +162,12 @@ class _Workspace:
         self.done = np.zeros(size, dtype=np.bool_)
         self.touched = np.empty(1 << 12, dtype=np.int64)
 
+    def clean(self, visited: npt.NDArray[np.int64]) -> None:
+        """Reset the voxels a search listed as visited, for the next search."""
+        self.dist[visited] = np.inf
+        self.parent[visited] = -1
+        self.done[visited] = False
+
 
 _WORKSPACES = threading.local()
 
@@ -210,9 +216,7 @@ class DistanceField:
         self._index = np.sort(visited)
         self._dist_m = ws.dist[self._index] * voxel_size
         self._parent = ws.parent[self._index]
-        ws.dist[visited] = np.inf
-        ws.parent[visited] = -1
-        ws.done[visited] = False
+        ws.clean(visited)
         self.nearest_goal: IndexArray | None = (
             np.array(np.unravel_index(goal, self.shape), dtype=np.int64) if goal >= 0 else None
         )

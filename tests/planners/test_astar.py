@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from planners.astar import PathCache, astar
-from planners.search import DistanceField
+from planners.search import DistanceField, _workspace
 
 VOXEL = 0.1
 
@@ -36,6 +36,32 @@ def test_astar_length_equals_dijkstra(seed: int) -> None:
         assert np.all(passable[path[:, 0], path[:, 1], path[:, 2]])
         # The path's own length is the reported one.
         assert np.sum(np.linalg.norm(steps, axis=1)) * VOXEL == pytest.approx(length)
+
+
+def test_astar_searches_in_a_row_share_clean_buffers() -> None:
+    """A* reuses Dijkstra's per-thread buffers: found paths, unreachable goals (which flood the
+    start's component) and distance fields in any order give what each gives alone, and every
+    search leaves the buffers clean."""
+    passable = _random_grid(7, (16, 14, 7), 0.35)
+    free = np.argwhere(passable)
+    rng = np.random.default_rng(7)
+    starts = [tuple(int(v) for v in free[i]) for i in rng.choice(len(free), 3, replace=False)]
+    fields = {s: DistanceField(passable, s, VOXEL).dist_m.copy() for s in starts}
+    unreachable = 0
+    for start in starts * 2:
+        for goal in free[rng.choice(len(free), size=15, replace=False)]:
+            path, length = astar(passable, start, goal, VOXEL)
+            expected = fields[start][tuple(goal)]
+            if np.isfinite(expected):
+                assert length == pytest.approx(expected, abs=1e-9)
+                assert tuple(path[-1]) == tuple(goal)
+            else:
+                unreachable += 1
+                assert len(path) == 0 and length == np.inf
+        np.testing.assert_allclose(DistanceField(passable, start, VOXEL).dist_m, fields[start])
+        ws = _workspace(passable.size)
+        assert np.all(np.isinf(ws.dist)) and np.all(ws.parent == -1) and not ws.done.any()
+    assert unreachable > 0  # the grid has closed pockets: the flooding case was exercised
 
 
 def test_astar_does_not_cut_corners() -> None:
