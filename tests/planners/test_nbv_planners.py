@@ -257,6 +257,22 @@ def test_aep_finishes_with_nothing_cached_and_nothing_to_see() -> None:
     assert plan.done
 
 
+def test_aep_samples_the_whole_area_when_its_cache_runs_dry() -> None:
+    """Nothing cached and nothing within the local trees' reach, but unknown space farther on:
+    AEP grows a tree in the whole area, flies its first edge and caches its views."""
+    state = _corridor(8.0)
+    state[72:75, 19:22, 11:14] = VoxelState.UNKNOWN  # 5.7 m ahead, out of the box's reach
+    planner = make("aep", {"sampling_radius_m": 0.3, "max_nodes": 60, "zero_gain": 0.001})
+    assert isinstance(planner, Aep)
+    planner.reset(_context())
+    obs = _observe(state)
+    plan = planner.plan(obs)
+    assert not plan.done, plan.info
+    assert plan.info["mode"] == "wide"
+    assert len(planner._cache) > 0
+    _assert_flyable(obs, plan.waypoints)
+
+
 def _holed_wall() -> np.ndarray:
     """All known but a thick wall at y < 0.3 m whose unknown interior shows through a hole in
     its occupied layer, 1.8 m to the vehicle's right (as grazing rays leave walls on MAZE)."""
