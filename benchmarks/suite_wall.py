@@ -6,8 +6,10 @@ with the runs), submit the suite as one job group (`POST /api/v1/groups`: the pl
 areas, R runs each, each run lasting `--time-scale` x the area's plateau time, the duration the
 service gives a run by default), and wait for it. Reports the wall time from submission to the
 group's end, the simulated seconds, simulated seconds per wall second, the speed-up over one
-worker, and what the rate means for the full suite (11 areas x 5 runs at the plateau times:
-56,250 simulated s) beside the paper's 17 h 30 min.
+worker, the CPU seconds the workers and the API process used meanwhile (how many cores the
+workers kept busy, and their CPU per simulated second: what a run costs), and what the rate
+means for the full suite (11 areas x 5 runs at the plateau times: 56,250 simulated s) beside
+the paper's 17 h 30 min.
 
 Run (a small subset; the full suite takes hours):
     .venv/bin/python benchmarks/suite_wall.py --areas maze offices-a --runs 1 --time-scale 0.1
@@ -59,6 +61,32 @@ def _wait(what: str, check: Any, timeout: float, log: Path) -> float:
     return time.monotonic() - began
 
 
+def _cpu_s(pid: int) -> dict[str, float]:
+    """CPU seconds (user + system, all threads) used so far by process `pid` ("api") and by
+    all its descendants ("workers": the worker processes and their pool children), from /proc.
+    A process that exits between two readings takes its seconds with it, so read while the
+    tree is alive."""
+    tick = os.sysconf("SC_CLK_TCK")
+    parent: dict[int, int] = {}
+    used: dict[int, float] = {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            # The command name may hold spaces and parentheses: split after its closing one.
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        parent[int(entry.name)] = int(fields[1])
+        used[int(entry.name)] = (int(fields[11]) + int(fields[12])) / tick
+    tree, frontier = set(), [pid]
+    while frontier:
+        children = [p for p, pp in parent.items() if pp in frontier and p not in tree]
+        tree.update(children)
+        frontier = children
+    return {"api": used.get(pid, 0.0), "workers": sum(used[p] for p in tree)}
+
+
 def _healthy(base: str) -> bool:
     try:
         return httpx.get(f"{base}/healthz", timeout=2).status_code == 200
@@ -88,6 +116,7 @@ def measure(workers: int, args: argparse.Namespace, builtin_areas: list[str]) ->
             plateau = {a["name"]: a["plateau_s"]
                        for a in httpx.get(f"{base}/api/v1/areas", timeout=30).json()}
             began = time.monotonic()
+            cpu_began = _cpu_s(proc.pid)
             response = httpx.post(f"{base}/api/v1/groups", timeout=120,
                                   headers={"Authorization": f"Bearer {token}"},
                                   json={"planners": [args.planner], "areas": args.areas,
@@ -102,6 +131,7 @@ def measure(workers: int, args: argparse.Namespace, builtin_areas: list[str]) ->
                 time.sleep(1.0)
                 group = httpx.get(f"{base}/api/v1/groups/{group['id']}", timeout=30).json()
             wall = time.monotonic() - began
+            cpu_ended = _cpu_s(proc.pid)
             runs = []
             for planner in group["planners"]:
                 for job_id in planner["jobs"]:
@@ -115,12 +145,16 @@ def measure(workers: int, args: argparse.Namespace, builtin_areas: list[str]) ->
             except subprocess.TimeoutExpired:
                 proc.kill()
     simulated = sum(r["result"]["simulated_until_s"] for r in runs if r["result"])
+    cpu = {k: cpu_ended[k] - cpu_began[k] for k in cpu_began}
     return {
         "plateau_s": plateau, "workers": workers, "status": group["status"],
         "by_status": group["by_status"],
         "startup_s": round(startup, 1), "area_sync_s": round(synced, 1),
         "wall_s": round(wall, 1), "simulated_s": round(simulated, 1),
         "sim_per_wall": simulated / wall if wall > 0 else 0.0,
+        "worker_cpu_s": round(cpu["workers"], 1), "api_cpu_s": round(cpu["api"], 1),
+        "worker_cores_busy": cpu["workers"] / wall if wall > 0 else 0.0,
+        "worker_cpu_per_sim_s": cpu["workers"] / simulated if simulated > 0 else 0.0,
         "run_wall_s": [round(r["wall_time_s"] or 0.0, 1) for r in runs],
         "runs": [{"area": r["area"], "seed": r["seed"], "seconds": r["seconds"],
                   "status": r["status"], "wall_s": r["wall_time_s"],
@@ -174,12 +208,15 @@ def main() -> None:
         projected = full_suite_s / r["sim_per_wall"] if r["sim_per_wall"] else float("nan")
         rows.append([r["workers"], r["status"], f"{r['wall_s']:.1f}", f"{r['simulated_s']:.0f}",
                      f"{r['sim_per_wall']:.2f}", f"{base_wall / r['wall_s']:.2f}",
+                     f"{r['worker_cpu_s']:.0f}", f"{r['worker_cores_busy']:.2f}",
+                     f"{1000 * r['worker_cpu_per_sim_s']:.1f}", f"{r['api_cpu_s']:.0f}",
                      _hours(projected), _hours(PAPER_SUITE_WALL_S)])
         r["projected_full_suite_s"] = projected
         r["speedup"] = base_wall / r["wall_s"]
     print_table(f"suite wall time: {args.planner}, {len(args.areas)} area(s) x {args.runs} "
                 f"run(s), time scale {args.time_scale:g}",
                 ["workers", "status", "wall s", "simulated s", "sim s / wall s", "speed-up",
+                 "worker CPU s", "worker cores busy", "worker CPU ms / sim s", "API CPU s",
                  "full suite at this rate", "paper"], rows)
     print_table("per run", ["workers", "area", "seed", "sim s", "status", "worker wall s"],
                 [[r["workers"], x["area"], x["seed"], x["seconds"], x["status"],
