@@ -5,8 +5,8 @@ whose view gains more than `zero_gain` are cached in a spatial index. When no lo
 worth `zero_gain`, the cached nodes are re-evaluated on the current map (best first, by their
 cached gain discounted by the straight-line distance, an upper bound of their worth) and the
 vehicle flies a shortest grid path to the one with the best gain * exp(-lambda * path length).
-Exploration ends when no cached node gains more than `zero_gain` and a tree sampled in the
-whole area (NBVP's rule before ending) finds no gain either.
+When no cached node gains more than `zero_gain`, Classic's nearest frontier takes over, and
+Classic's own end condition ends the exploration.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ import numpy.typing as npt
 from pydantic import Field
 
 from planners.api import Observation, Plan, PlannerContext
+from planners.classic import Classic, ClassicConfig
 from planners.nbv_tree import TreeOutcome
 from planners.nbvp import Nbvp, NbvpConfig
 from planners.spatial import SpatialIndex
@@ -58,6 +59,8 @@ class AepConfig(NbvpConfig):
     ray_step_deg: float = Field(10.0, gt=0.0, le=30.0)
     # Our choice: one cached node per half metre keeps the cache small; AEP caches every node.
     cache_spacing_m: float = Field(0.5, gt=0.0)
+    # Our choice: when the cache runs dry, Classic's nearest frontier (see `_fall_back`).
+    fallback: ClassicConfig = ClassicConfig()
 
 
 class Aep(Nbvp):
@@ -67,6 +70,8 @@ class Aep(Nbvp):
     def reset(self, ctx: PlannerContext) -> None:
         super().reset(ctx)
         self._cache = SpatialIndex(cell_m=max(self.config.cache_spacing_m, 0.5))
+        self._fallback = Classic(self.config.fallback)
+        self._fallback.reset(ctx)
 
     def grow(self, obs: Observation, root: FloatArray) -> TreeOutcome:
         outcome = super().grow(obs, root)
@@ -94,7 +99,7 @@ class Aep(Nbvp):
         gains = self.gain_evaluator(view.voxel_size)
         ids = self._cache.ids()
         if len(ids) == 0:
-            return self._last_resort(obs, outcome, "no cached node left")
+            return self._fall_back(obs, "no cached node left")
         dist = np.linalg.norm(self._cache.points(ids) - here, axis=1)
         # Upper bounds of each node's worth: gains only shrink as the map fills in, and a
         # path is never shorter than the straight line.
@@ -126,20 +131,19 @@ class Aep(Nbvp):
             if best is None or score > best[0]:
                 best = (score, waypoints)
         if best is None:
-            return self._last_resort(obs, outcome,
-                                     "no cached node gains more than the threshold")
+            return self._fall_back(obs, "no cached node gains more than the threshold")
         return Plan(best[1], info={"mode": "global", "candidates": len(ids),
                                    "evaluated": evaluated, "score": best[0]})
 
-    def _last_resort(self, obs: Observation, local: TreeOutcome, reason: str) -> Plan:
-        """Before ending, a tree sampled in the whole area, as NBVP grows one: the cache only
-        holds views the local trees passed, so it can run dry while unknown space lies beyond
-        every tree so far (a traced MAZE run ended at 108 s with 29 % covered). Its nodes are
-        cached like any tree's."""
-        if self.config.sampling_radius_m is not None:
-            wide, grown = self._grow_wide(obs, local)
-            if grown is not local:
-                self._remember(grown)
-            if wide is not None:
-                return wide
-        return Plan.finished(reason)
+    def _fall_back(self, obs: Observation, why: str) -> Plan:
+        """Classic's nearest frontier, whose own end condition ends the exploration. The cache
+        holds only views the local trees passed, and a tree's branch counts only when its
+        discounted value (lambda 0.75 /m) exceeds 1 m³: in a maze whose unknown part lies a few
+        metres down a corridor, neither may see it (a MAZE run in the service ended at 108 s,
+        29 % covered, with a frontier 4.7 m away). The local trees take over again from there."""
+        plan = self._fallback.plan(obs)
+        if plan.done:
+            return Plan.finished(f"{why}, and {plan.info.get('reason', 'no frontier left')}")
+        info = dict(plan.info)
+        info.update({"mode": "classic", "why": why})
+        return Plan(plan.waypoints, horizon_s=plan.horizon_s, info=info)

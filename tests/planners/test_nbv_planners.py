@@ -257,19 +257,21 @@ def test_aep_finishes_with_nothing_cached_and_nothing_to_see() -> None:
     assert plan.done
 
 
-def test_aep_samples_the_whole_area_when_its_cache_runs_dry() -> None:
-    """Nothing cached and nothing within the local trees' reach, but unknown space farther on:
-    AEP grows a tree in the whole area, flies its first edge and caches its views."""
+def test_aep_flies_to_the_nearest_frontier_when_its_cache_runs_dry() -> None:
+    """Nothing cached and no branch worth `zero_gain` (the unknown lies beyond the trees'
+    reach): Classic's nearest frontier takes over instead of ending the exploration."""
     state = _corridor(8.0)
     state[72:75, 19:22, 11:14] = VoxelState.UNKNOWN  # 5.7 m ahead, out of the box's reach
-    planner = make("aep", {"sampling_radius_m": 0.3, "max_nodes": 60, "zero_gain": 0.001})
+    planner = make("aep", {"sampling_radius_m": 0.3})
     assert isinstance(planner, Aep)
     planner.reset(_context())
     obs = _observe(state)
     plan = planner.plan(obs)
     assert not plan.done, plan.info
-    assert plan.info["mode"] == "wide"
-    assert len(planner._cache) > 0
+    assert plan.info["mode"] == "classic" and plan.info["why"] == "no cached node left"
+    # Toward the unknown block at x = 7.2-7.5 m, ending where the camera sees it.
+    assert plan.waypoints[-1, 0] > START[0] + 1.5
+    assert math.cos(plan.waypoints[-1, 3]) > 0.5
     _assert_flyable(obs, plan.waypoints)
 
 
