@@ -59,8 +59,9 @@ class AepConfig(NbvpConfig):
     ray_step_deg: float = Field(10.0, gt=0.0, le=30.0)
     # Our choice: one cached node per half metre keeps the cache small; AEP caches every node.
     cache_spacing_m: float = Field(0.5, gt=0.0)
-    # Our choice: when the cache runs dry, Classic's nearest frontier (see `_fall_back`).
-    fallback: ClassicConfig = ClassicConfig()
+    # Our choice: when the cache runs dry, Classic's nearest frontier (see `_fall_back`);
+    # None ends the exploration there, as aep-v1 did.
+    fallback: ClassicConfig | None = ClassicConfig()
 
 
 class Aep(Nbvp):
@@ -70,8 +71,10 @@ class Aep(Nbvp):
     def reset(self, ctx: PlannerContext) -> None:
         super().reset(ctx)
         self._cache = SpatialIndex(cell_m=max(self.config.cache_spacing_m, 0.5))
-        self._fallback = Classic(self.config.fallback)
-        self._fallback.reset(ctx)
+        self._fallback: Classic | None = None
+        if self.config.fallback is not None:
+            self._fallback = Classic(self.config.fallback)
+            self._fallback.reset(ctx)
 
     def grow(self, obs: Observation, root: FloatArray) -> TreeOutcome:
         outcome = super().grow(obs, root)
@@ -141,9 +144,24 @@ class Aep(Nbvp):
         discounted value (lambda 0.75 /m) exceeds 1 m³: in a maze whose unknown part lies a few
         metres down a corridor, neither may see it (a MAZE run in the service ended at 108 s,
         29 % covered, with a frontier 4.7 m away). The local trees take over again from there."""
+        if self._fallback is None:
+            return Plan.finished(why)
         plan = self._fallback.plan(obs)
         if plan.done:
             return Plan.finished(f"{why}, and {plan.info.get('reason', 'no frontier left')}")
         info = dict(plan.info)
         info.update({"mode": "classic", "why": why})
         return Plan(plan.waypoints, horizon_s=plan.horizon_s, info=info)
+
+
+class AepV1Config(AepConfig):
+    """aep-v1: the exploration ends when the cache runs dry."""
+
+    fallback: ClassicConfig | None = None
+
+
+class AepV1(Aep):
+    """aep-v1, kept registered so that its stored results stay comparable and re-runnable."""
+
+    config_model = AepV1Config
+    config: AepV1Config

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from planners.aep import Aep
+from planners.aep import Aep, AepV1
 from planners.classic import Classic
 from planners.esm import Esm, EsmRecon
 from planners.nbvp import Nbvp
@@ -35,14 +35,23 @@ register(
     reference="A. Bircher, M. Kamel, K. Alexis, H. Oleynikova, R. Siegwart, Receding horizon "
     "'next-best-view' planner for 3D exploration, ICRA 2016",
 )
+_AEP_REFERENCE = ("M. Selin, M. Tiger, D. Duberg, F. Heintz, P. Jensfelt, Efficient "
+                  "autonomous exploration planning of large-scale 3-D environments, RA-L 2019")
 register(
     "aep",
     1,
+    AepV1,
+    description="NBVP-like local RRT* with best yaws, plus cached high-gain nodes revisited "
+    "when the local gain runs out; ends when no cached node is worth visiting.",
+    reference=_AEP_REFERENCE,
+)
+register(
+    "aep",
+    2,
     Aep,
     description="NBVP-like local RRT* with best yaws, plus cached high-gain nodes revisited "
-    "when the local gain runs out.",
-    reference="M. Selin, M. Tiger, D. Duberg, F. Heintz, P. Jensfelt, Efficient autonomous "
-    "exploration planning of large-scale 3-D environments, RA-L 2019",
+    "when the local gain runs out, and the nearest frontier when none is worth visiting.",
+    reference=_AEP_REFERENCE,
 )
 register(
     "splatplanner",

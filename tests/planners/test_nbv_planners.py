@@ -11,7 +11,7 @@ from planners.aep import Aep, AepConfig
 from planners.gain import GainEvaluator
 from planners.nbv_tree import TreeSettings, grow_tree
 from planners.nbvp import Nbvp, NbvpConfig
-from planners.registry import make
+from planners.registry import make, spec
 from planners.surface_gaps import close_surface_gaps
 from sim.camera import CameraConfig
 from sim.geometry import Pose
@@ -273,6 +273,11 @@ def test_aep_flies_to_the_nearest_frontier_when_its_cache_runs_dry() -> None:
     assert plan.waypoints[-1, 0] > START[0] + 1.5
     assert math.cos(plan.waypoints[-1, 3]) > 0.5
     _assert_flyable(obs, plan.waypoints)
+    # aep-v1, kept for its stored results, ends there; "aep" is the newest version.
+    first = make("aep-v1", {"sampling_radius_m": 0.3})
+    first.reset(_context())
+    assert first.plan(obs).done
+    assert spec("aep").id == "aep-v2"
 
 
 def _holed_wall() -> np.ndarray:
