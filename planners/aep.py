@@ -20,7 +20,7 @@ import numpy.typing as npt
 from pydantic import Field
 
 from planners.api import Observation, Plan, PlannerContext
-from planners.classic import Classic, ClassicConfig
+from planners.classic import Classic, ClassicConfig, frontier_fallback
 from planners.nbv_tree import TreeOutcome
 from planners.nbvp import Nbvp, NbvpConfig
 from planners.spatial import SpatialIndex
@@ -146,12 +146,10 @@ class Aep(Nbvp):
         29 % covered, with a frontier 4.7 m away). The local trees take over again from there."""
         if self._fallback is None:
             return Plan.finished(why)
-        plan = self._fallback.plan(obs)
+        plan = frontier_fallback(self._fallback, obs, why=why)
         if plan.done:
             return Plan.finished(f"{why}, and {plan.info.get('reason', 'no frontier left')}")
-        info = dict(plan.info)
-        info.update({"mode": "classic", "why": why})
-        return Plan(plan.waypoints, horizon_s=plan.horizon_s, info=info)
+        return plan
 
 
 class AepV1Config(AepConfig):

@@ -8,6 +8,8 @@ Frontier voxels that stay frontiers after being looked at from their viewpoint t
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from pydantic import Field
 
@@ -82,3 +84,13 @@ class Classic(Planner):
             horizon_s=0.0,
             info={"clusters": len(clusters), "path_m": field.distance_to(goal)},
         )
+
+
+def frontier_fallback(fallback: Classic, obs: Observation, **info: Any) -> Plan:
+    """Classic's nearest frontier as another planner's fallback: Classic's plan, marked
+    `mode: classic` with `info` added, or Classic's own end of the exploration."""
+    plan = fallback.plan(obs)
+    if plan.done:
+        return plan
+    merged = {**plan.info, "mode": "classic", **info}
+    return Plan(plan.waypoints, horizon_s=plan.horizon_s, info=merged)

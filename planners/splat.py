@@ -29,7 +29,7 @@ from pydantic import Field
 
 from planners.api import Observation, Plan, Planner, PlannerConfig, PlannerContext
 from planners.astar import PathCache
-from planners.classic import Classic, ClassicConfig
+from planners.classic import Classic, ClassicConfig, frontier_fallback
 from planners.give_up import GiveUpTracker
 from planners.lines import segments_clear
 from planners.permutohedral import PermutohedralLattice
@@ -386,10 +386,5 @@ class SplatPlanner(Planner):
 
     def _fall_back(self, obs: Observation, why: str, vertices: int = 0) -> Plan:
         """Classic's nearest frontier, whose own end condition ends the exploration."""
-        plan = self._fallback.plan(obs)
         self._goal, self._target = None, None
-        if plan.done:
-            return plan
-        info = dict(plan.info)
-        info.update({"mode": "classic", "why": why, "vertices": vertices})
-        return Plan(plan.waypoints, horizon_s=plan.horizon_s, info=info)
+        return frontier_fallback(self._fallback, obs, why=why, vertices=vertices)
