@@ -347,6 +347,7 @@ def _print_summary(payload: dict[str, Any], out: Path) -> None:
         ("observable volume", f"{payload['observable_volume_m3']:.1f} m³"),
         ("coverage", f"{payload['coverage']:.3f}"),
         ("collisions", str(payload["collisions"])),
+        ("safety stops", str(payload.get("safety_stops", 0))),
         ("path length", f"{payload['path_length_m']:.1f} m"),
         ("iterations", str(payload["iterations"])),
         ("planning time mean / max", f"{timing['mean']:.1f} / {timing['max']:.1f} ms"),

@@ -41,6 +41,11 @@ class EpisodeConfig(BaseModel):
     safety_margin_m: float = Field(
         0.15, ge=0.0, description="added to the vehicle radius for traversability"
     )
+    safety_stops: bool = Field(
+        True,
+        description="brake to a stop when an occupancy update finds an obstacle within the "
+        "safety radius of the rest of the path being flown",
+    )
     planning_time_charge: Literal["wall", "none"] = Field(
         "wall",
         description="'wall' charges each plan call's wall time to the simulated clock; "

@@ -4,6 +4,9 @@
 vehicle tracks the reference; at each camera frame the simulator renders depth where a map needs
 it, adds noise, fuses the frame, and samples the metrics; whenever the planner's horizon runs out
 it is asked again (at rest, or mid-flight when the plan asked for it with `Plan.replan_s`).
+While a plan is flown, every occupancy update is checked against the rest of its path: an obstacle
+found since the plan was accepted, within the safety radius of that path, makes the vehicle brake
+to a stop (a safety stop) and the planner is asked again with the outcome BLOCKED.
 The run ends at the time limit, when the planner says done (the rest of the curve is then flat
 and not simulated), on a collision (`crashed`) or on a planner failure.
 """
@@ -27,15 +30,17 @@ from sim.interface import Observation, Plan, PlannerContext, PlannerLike, PlanOu
 from sim.map_view import MappingStack
 from sim.metrics import coverage, sdf_surface_recall, surface_scores
 from sim.noise import OdometryDrift, add_depth_noise
+from sim.occupancy import StateGrid
 from sim.recording import RecordingWriter
 from sim.result import EpisodeResult, RunStatus
-from sim.search_checks import plan_is_clear
+from sim.search_checks import path_meets_new_obstacle, plan_is_clear
 from sim.trajectory import (
     Trajectory,
     TrajectoryError,
     TrajectorySample,
     plan_trajectory,
     plan_trajectory_from,
+    stop_trajectory,
 )
 from sim.tsdf import TsdfVolume
 from sim.world import World
@@ -86,6 +91,11 @@ class _Flight:
     stop_leg: int
     replan_s: float | None = None  # ask again this often in flight (None: only at the end)
     next_replan: float = math.inf  # simulated time of the next mid-flight question
+    # The map the path was checked against; None for flights the map does not guard (the
+    # start-up turn in place, a safety stop).
+    checked_on: StateGrid | None = None
+    checked_at_update: int = 0  # occupancy updates counted when the path was last checked
+    braking: bool = False  # a safety stop
 
     def reference(self, now: float) -> TrajectorySample:
         return self.trajectory.sample(min(now - self.start_time, self.stop_after))
@@ -192,6 +202,8 @@ class _EpisodeRunner:
                                       seed)
         self.path_length = 0.0
         self.collisions = 0
+        self.safety_stops = 0
+        self.occupancy_updates = 0
         self.planning_ms: list[float] = []
         self.planned_from = area.start.position.copy()
 
@@ -269,8 +281,10 @@ class _EpisodeRunner:
                 end = flight.trajectory.sample(flight.stop_after)
                 rest = np.array([*end.position, end.yaw])
                 hold = TrajectorySample(end.position, np.zeros(3), np.zeros(3), end.yaw, 0.0)
-                outcome = PlanOutcome.REACHED
+                outcome = PlanOutcome.BLOCKED if flight.braking else PlanOutcome.REACHED
                 flight = None
+            elif self._path_newly_blocked(flight):
+                flight = self._safety_stop(flight)
         simulated_until = self.world.time
         if status is RunStatus.SUCCEEDED:
             self._extend_flat()
@@ -377,9 +391,48 @@ class _EpisodeRunner:
             stop_leg = min(int(np.searchsorted(traj.leg_end_times, plan.horizon_s - 1e-9)),
                            traj.leg_count - 1)
         outcome = PlanOutcome.REACHED if clear == len(plan.waypoints) else PlanOutcome.BLOCKED
-        flight = _Flight(traj, self.world.time, float(traj.leg_end_times[stop_leg]), stop_leg)
+        checked_on = self.mapping.occupancy.copy_state() if self.cfg.safety_stops else None
+        flight = _Flight(traj, self.world.time, float(traj.leg_end_times[stop_leg]), stop_leg,
+                         checked_on=checked_on, checked_at_update=self.occupancy_updates)
         flight.schedule_replan(self.world.time, replan)
         return flight, outcome
+
+    def _path_newly_blocked(self, flight: _Flight) -> bool:
+        """Whether an occupancy update since the last look found an obstacle within the safety
+        radius of the rest of the flight's path. Thin surfaces seen from afar can be cleared
+        from the map by the rays that pass them and found again nearer, on a path already
+        accepted, so the map is not trusted only once, when the plan is checked."""
+        if (not self.cfg.safety_stops or flight.checked_on is None
+                or flight.checked_at_update == self.occupancy_updates):
+            return False
+        flight.checked_at_update = self.occupancy_updates
+        occ = self.mapping.occupancy
+        return path_meets_new_obstacle(occ.state, flight.checked_on, occ.origin, occ.voxel_size,
+                                       self.cfg.safety_radius_m, self._rest_of_path(flight))
+
+    def _rest_of_path(self, flight: _Flight) -> npt.NDArray[np.float64]:
+        """(K, 3) the path still to fly: the reference position, then samples of a curved first
+        leg (no more than half a voxel apart) and the waypoints ending the straight legs."""
+        traj = flight.trajectory
+        t = self.world.time - flight.start_time
+        leg = min(traj.leg_index(t), flight.stop_leg)
+        parts = [flight.reference(self.world.time).position[None]]
+        if leg == 0 and traj.curved_first_leg:
+            dt = 0.5 * self.area.voxel_size / self.cfg.limits.v_max
+            parts.append(traj.positions(float(traj.leg_end_times[0]), dt, start=t))
+            leg = 1
+        parts.append(traj.waypoints[leg:flight.stop_leg + 1, :3])
+        return np.vstack(parts)
+
+    def _safety_stop(self, flight: _Flight) -> _Flight:
+        """Brake from the current reference state as fast as the limits allow."""
+        try:
+            stop = stop_trajectory(flight.reference(self.world.time), self.cfg.limits)
+        except TrajectoryError:
+            return flight  # no stop from this state: fly on as planned
+        self.safety_stops += 1
+        self.recording.plan(self.world.time, stop.waypoints)
+        return _Flight(stop, self.world.time, stop.duration, 0, braking=True)
 
     def _first_leg_clear(self, traj: Trajectory, here: npt.NDArray[np.float64]) -> bool:
         """The first leg from a moving state is a curve: check it by its samples, close enough
@@ -476,6 +529,7 @@ class _EpisodeRunner:
                 ends, hit = self.camera.back_project(occ_depth, estimate, s)
                 if fuse_occ:
                     self.mapping.occupancy.integrate(estimate.position, ends, hit)
+                    self.occupancy_updates += 1
                 if fuse_tsdf:
                     # The surface layers count the frames the TSDF fuses (`sim/surface.py`).
                     self.mapping.surface.observe(estimate.position, ends[hit])
@@ -581,5 +635,5 @@ class _EpisodeRunner:
             recall_times=np.array(self.series.recall_times),
             recall=np.array(self.series.recall),
             frame_costs_ms=self.costs.per_frame_ms(),
-            mesh_vertices=vertices, mesh_triangles=triangles,
+            mesh_vertices=vertices, mesh_triangles=triangles, safety_stops=self.safety_stops,
         )

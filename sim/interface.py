@@ -24,7 +24,9 @@ class PlanOutcome(enum.StrEnum):
 
     NONE = "none"  # first call of the episode
     REACHED = "reached"  # flown to the end, or to the waypoint where the horizon ran out
-    BLOCKED = "blocked"  # rejected or cut short by the framework's collision check
+    # rejected or cut short by the framework's collision check, or stopped in flight because the
+    # map found an obstacle by the rest of its path (a safety stop)
+    BLOCKED = "blocked"
     INVALID = "invalid"  # malformed waypoints (NaN, outside the area, wrong shape)
     FLYING = "flying"  # asked mid-flight (`Plan.replan_s`); the previous plan is still flown
 

@@ -54,6 +54,7 @@ class EpisodeResult:
     mesh_triangles: npt.NDArray[np.int32] = field(
         default_factory=lambda: np.zeros((0, 3), dtype=np.int32)
     )
+    safety_stops: int = 0
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -74,6 +75,7 @@ class EpisodeResult:
                 self.explored_volume_m3, self.sim_seconds
             ),
             "collisions": self.collisions,
+            "safety_stops": self.safety_stops,
             "path_length_m": self.path_length_m,
             "iterations": self.iterations,
             "planning_time_ms": timing_summary(self.planning_times_ms),

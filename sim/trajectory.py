@@ -9,6 +9,9 @@ jerk by the vehicle limits.
 `plan_trajectory_from` starts instead from a moving state (for planners that replan in flight):
 its first leg cannot follow a straight segment, since the vehicle's velocity need not point at
 the first waypoint, so the framework checks that leg by sampling it (`Trajectory.positions`).
+
+`stop_trajectory` brings a moving state to rest as fast as the limits allow, for a flight whose
+path the map no longer clears.
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from ruckig import InputParameter, Result, Ruckig, Synchronization
+from ruckig import ControlInterface, InputParameter, Result, Ruckig, Synchronization
 from ruckig import Trajectory as RuckigTrajectory
 
 from sim.geometry import FloatArray, wrap_angle
@@ -52,9 +55,11 @@ class TrajectorySample:
 class Trajectory:
     """A sequence of rest-to-rest legs through every waypoint."""
 
-    def __init__(self, legs: list[RuckigTrajectory], waypoints: FloatArray) -> None:
+    def __init__(self, legs: list[RuckigTrajectory], waypoints: FloatArray,
+                 curved_first_leg: bool = False) -> None:
         self._legs = legs
         self.waypoints = waypoints
+        self._curved_first_leg = curved_first_leg
         durations = np.array([leg.duration for leg in legs], dtype=np.float64)
         self.leg_end_times = np.cumsum(durations)
         self.duration = float(self.leg_end_times[-1]) if legs else 0.0
@@ -67,11 +72,18 @@ class Trajectory:
         """Index of the leg active at time t (clamped)."""
         return min(int(np.searchsorted(self.leg_end_times, t, side="right")), len(self._legs) - 1)
 
-    def positions(self, until: float, dt: float) -> FloatArray:
-        """(K, 3) reference positions every `dt` seconds from 0 to `until` (clamped to the
-        duration), both ends included."""
+    @property
+    def curved_first_leg(self) -> bool:
+        """True when the first leg starts moving (`plan_trajectory_from`, `stop_trajectory`):
+        it need not follow the segment to its waypoint."""
+        return self._curved_first_leg
+
+    def positions(self, until: float, dt: float, start: float = 0.0) -> FloatArray:
+        """(K, 3) reference positions every `dt` seconds from `start` to `until` (both clamped
+        to the duration), both ends included."""
         end = min(max(until, 0.0), self.duration)
-        times = np.append(np.arange(0.0, end, dt), end)
+        first = min(max(start, 0.0), end)
+        times = np.append(np.arange(first, end, dt), end)
         return np.array([self.sample(float(t)).position for t in times])
 
     def sample(self, t: float) -> TrajectorySample:
@@ -153,7 +165,65 @@ def plan_trajectory_from(
         target = _short_yaw(float(current[3]), wp)
         legs.append(_leg(otg, current, target, limits))
         current = target
-    return Trajectory(legs, wps)
+    return Trajectory(legs, wps, curved_first_leg=True)
+
+
+def stop_trajectory(state: TrajectorySample, limits: VehicleLimits) -> Trajectory:
+    """The quickest jerk-limited stop from a moving reference `state`: velocity, acceleration
+    and yaw rate brought to zero, the path going on where the motion carries it.
+
+    Its one waypoint is where the vehicle comes to rest.
+    """
+    moving = np.array([*state.velocity, state.yaw_rate], dtype=np.float64)
+    accel = np.array([*state.acceleration, 0.0], dtype=np.float64)
+    start = np.array([*state.position, state.yaw], dtype=np.float64)
+    if not (np.all(np.isfinite(start)) and np.all(np.isfinite(moving))
+            and np.all(np.isfinite(accel))):
+        raise TrajectoryError("the start state must be finite")
+    speed = float(np.linalg.norm(moving[:3]))
+    heading = np.abs(moving[:3]) / speed if speed > 1e-9 else np.zeros(3)
+    weights = _axis_weights(heading, moving[:3], accel[:3], limits)
+    inp = InputParameter(4)
+    inp.control_interface = ControlInterface.Velocity
+    inp.current_position = start.tolist()
+    inp.current_velocity = moving.tolist()
+    inp.current_acceleration = accel.tolist()
+    inp.target_velocity = [0.0, 0.0, 0.0, 0.0]
+    inp.target_acceleration = [0.0, 0.0, 0.0, 0.0]
+    inp.max_velocity = [*np.maximum(limits.v_max * weights, _MIN_LIMIT), limits.yaw_rate_max]
+    inp.max_acceleration = [*np.maximum(limits.a_max * weights, _MIN_LIMIT),
+                            limits.yaw_acc_max]
+    inp.max_jerk = [*np.maximum(limits.j_max * weights, _MIN_LIMIT), limits.yaw_jerk_max]
+    # Phase synchronisation keeps a straight flight braking on its line; ruckig falls back to
+    # time synchronisation when the motion is not along one line.
+    inp.synchronization = Synchronization.Phase
+    traj = RuckigTrajectory(4)
+    result = Ruckig(4).calculate(inp, traj)
+    if result not in (Result.Working, Result.Finished):
+        raise TrajectoryError(f"ruckig could not stop from {start.tolist()}: {result}")
+    end, _, _ = traj.at_time(traj.duration)
+    return Trajectory([traj], np.array([end], dtype=np.float64), curved_first_leg=True)
+
+
+def _axis_weights(
+    direction: FloatArray, velocity: FloatArray, acceleration: FloatArray,
+    limits: VehicleLimits,
+) -> FloatArray:
+    """(3,) unit vector of per-axis shares of the norm limits for a leg that starts moving.
+
+    It leans toward `direction` (of the leg, (3,) absolute direction cosines), the current
+    velocity and the current acceleration, plus a floor on every axis: an axis with almost no
+    limit but some motion left to undo would take ruckig minutes to settle.
+    """
+    speed = float(np.linalg.norm(velocity))
+    vel_dir = np.abs(velocity) / speed if speed > 1e-9 else np.zeros(3)
+    accel = float(np.linalg.norm(acceleration))
+    acc_dir = np.abs(acceleration) / accel if accel > 1e-9 else np.zeros(3)
+    blend = (direction + min(speed / limits.v_max, 1.0) * vel_dir
+             + min(accel / limits.a_max, 1.0) * acc_dir + _AXIS_FLOOR)
+    norm = float(np.linalg.norm(blend))
+    weights: FloatArray = blend / norm if norm > 1e-12 else np.full(3, 1.0 / np.sqrt(3.0))
+    return weights
 
 
 def _moving_leg(
@@ -163,22 +233,13 @@ def _moving_leg(
     """A leg from a moving state to rest at `target`, time-synchronised.
 
     Per-axis limits are the norm limits times the components of a unit vector, so the norms
-    stay within the vehicle limits; the vector leans toward the leg's direction, the current
-    velocity and the current acceleration, plus a floor on every axis: an axis with almost no
-    limit but some motion left to undo would take ruckig minutes to settle. An axis whose
-    current velocity or acceleration exceeds its limit is braked back into it by ruckig.
+    stay within the vehicle limits (`_axis_weights`). An axis whose current velocity or
+    acceleration exceeds its limit is braked back into it by ruckig.
     """
     delta = target[:3] - start[:3]
     length = float(np.linalg.norm(delta))
     leg_dir = np.abs(delta) / length if length > 1e-9 else np.zeros(3)
-    speed = float(np.linalg.norm(velocity[:3]))
-    vel_dir = np.abs(velocity[:3]) / speed if speed > 1e-9 else np.zeros(3)
-    accel = float(np.linalg.norm(acceleration[:3]))
-    acc_dir = np.abs(acceleration[:3]) / accel if accel > 1e-9 else np.zeros(3)
-    blend = (leg_dir + min(speed / limits.v_max, 1.0) * vel_dir
-             + min(accel / limits.a_max, 1.0) * acc_dir + _AXIS_FLOOR)
-    norm = float(np.linalg.norm(blend))
-    weights = blend / norm if norm > 1e-12 else np.full(3, 1.0 / np.sqrt(3.0))
+    weights = _axis_weights(leg_dir, velocity[:3], acceleration[:3], limits)
     inp = InputParameter(4)
     inp.current_position = start.tolist()
     inp.current_velocity = velocity.tolist()

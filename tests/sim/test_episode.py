@@ -1,8 +1,9 @@
-"""End-to-end episodes: Classic on MAZE for a short time."""
+"""End-to-end episodes: Classic on MAZE for a short time, and scripted flights."""
 
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 
 from areas import load_area, load_ground_truth
@@ -10,8 +11,10 @@ from planners.registry import make
 from sim.config import preset
 from sim.episode import run_episode
 from sim.interface import Observation, Plan, PlannerContext, PlanOutcome
+from sim.occupancy import OccupancyMap
 from sim.recording import Recording
 from sim.result import EpisodeResult, RunStatus
+from sim.search_checks import plan_is_clear
 
 
 def _run(seed: int, preset_name: str, seconds: float, *, charge_planning_time: bool = True,
@@ -161,3 +164,93 @@ def test_keeping_with_a_zero_period_does_not_stall_the_clock() -> None:
     assert result.status is RunStatus.SUCCEEDED, result.reason
     times = np.array([c[0] for c in planner.calls])
     assert np.all(np.diff(times) > 0.1)  # asked again only after the flight's own period
+
+
+class _Dash:
+    """One straight flight of 3-4 m from the start, yawed along it; then finishes. Records the
+    calls as (time, last outcome, position, speed)."""
+
+    def __init__(self) -> None:
+        self.goal: np.ndarray | None = None
+        self.calls: list[tuple[float, str, np.ndarray, float]] = []
+
+    def reset(self, ctx: PlannerContext) -> None:
+        self.start = ctx.start.position.copy()
+
+    def plan(self, obs: Observation) -> Plan:
+        self.calls.append((obs.time, obs.last_outcome.value, obs.pose.position.copy(),
+                           float(np.linalg.norm(obs.velocity))))
+        if self.goal is not None:
+            return Plan.finished("dashed")
+        view = obs.map
+        here = obs.pose.position
+        centres = view.index_to_world(np.argwhere(view.traversable))
+        offsets = centres - here
+        distance = np.linalg.norm(offsets, axis=1)
+        level = np.abs(offsets[:, 2]) < 0.05
+        for i in np.flatnonzero(level & (distance > 3.0) & (distance < 4.0)):
+            if plan_is_clear(view.traversable, view.free, view.origin, view.voxel_size, here,
+                             centres[i][None]) == 1:
+                self.goal = centres[i]
+                break
+        assert self.goal is not None, "no straight 3-4 m flight from the start"
+        yaw = float(np.arctan2(*(self.goal - here)[1::-1]))
+        return Plan(np.array([[*self.goal, yaw]]))
+
+
+def _dash_run(monkeypatch: pytest.MonkeyPatch, obstacle_at: float | None) -> tuple[
+    _Dash, EpisodeResult, np.ndarray | None
+]:
+    """A dash in MAZE; with `obstacle_at`, the map is told of an obstacle at that fraction of
+    the way, from the third occupancy update after the plan on (as a thin surface the map had
+    cleared from afar and finds again)."""
+    planner = _Dash()
+    obstacle: list[np.ndarray] = []
+    updates = [0]
+    original = OccupancyMap.integrate
+
+    def integrate(self: OccupancyMap, origin: npt.ArrayLike, endpoints: npt.ArrayLike,
+                  hit: npt.ArrayLike) -> int:
+        if planner.goal is not None and obstacle_at is not None:
+            if not obstacle:
+                obstacle.append(planner.start + obstacle_at * (planner.goal - planner.start))
+            updates[0] += 1
+            if updates[0] > 2:
+                endpoints = np.vstack([np.asarray(endpoints), obstacle[0][None]])
+                hit = np.append(np.asarray(hit), True)
+        return original(self, origin, endpoints, hit)
+
+    monkeypatch.setattr(OccupancyMap, "integrate", integrate)
+    area = load_area("maze")
+    result = run_episode(area, load_ground_truth(area), planner, preset("exact"), 0,  # type: ignore[arg-type]
+                         seconds=15.0)
+    return planner, result, obstacle[0] if obstacle else None
+
+
+def test_an_obstacle_found_on_the_path_in_flight_stops_the_vehicle_before_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    planner, result, obstacle = _dash_run(monkeypatch, obstacle_at=0.85)
+    assert obstacle is not None
+    assert result.safety_stops == 1
+    assert result.collisions == 0
+    _, outcome, stopped_at, speed = planner.calls[-1]
+    assert outcome == "blocked"
+    assert speed < 0.1  # asked again at rest
+    assert planner.goal is not None
+    flown = np.linalg.norm(stopped_at - planner.start)
+    assert flown > 1.0  # it was under way when the obstacle appeared
+    # Stopped short of the obstacle by more than the vehicle's radius.
+    assert np.linalg.norm(obstacle - stopped_at) > 0.35
+    assert flown < np.linalg.norm(obstacle - planner.start)
+
+
+def test_without_a_new_obstacle_the_flight_is_not_stopped(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    planner, result, _ = _dash_run(monkeypatch, obstacle_at=None)
+    assert result.safety_stops == 0
+    _, outcome, reached, _ = planner.calls[-1]
+    assert outcome == "reached"
+    assert planner.goal is not None
+    assert np.linalg.norm(reached - planner.goal) < 0.1

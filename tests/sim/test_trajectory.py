@@ -15,6 +15,7 @@ from sim.trajectory import (
     TrajectorySample,
     plan_trajectory,
     plan_trajectory_from,
+    stop_trajectory,
 )
 from sim.vehicle import VehicleLimits
 
@@ -287,3 +288,49 @@ def test_from_a_non_finite_state_raises() -> None:
     bad = TrajectorySample(np.array([0.0, np.nan, 1.0]), np.zeros(3), np.zeros(3), 0.0, 0.0)
     with pytest.raises(TrajectoryError):
         plan_trajectory_from(bad, WAYPOINTS[:1], LIMITS)
+
+
+# -- safety stops -------------------------------------------------------------------------------
+
+
+def test_a_stop_mid_leg_brakes_on_the_leg_within_the_limits(traj: Trajectory) -> None:
+    t = 0.5 * float(traj.leg_end_times[0])  # mid first leg, at speed
+    state = traj.sample(t)
+    assert np.linalg.norm(state.velocity) > 0.5
+    stop = stop_trajectory(state, LIMITS)
+    assert stop.curved_first_leg and stop.leg_count == 1
+    s = sample_densely(stop, dt=0.005)
+    assert s.position[0] == pytest.approx(state.position, abs=1e-9)
+    assert s.velocity[0] == pytest.approx(state.velocity, abs=1e-9)
+    end = stop.sample(stop.duration)
+    assert np.linalg.norm(end.velocity) < 1e-9 and abs(end.yaw_rate) < 1e-9
+    assert stop.waypoints[0, :3] == pytest.approx(end.position)
+    assert np.linalg.norm(s.velocity, axis=1).max() <= LIMITS.v_max * (1 + 1e-6)
+    assert np.linalg.norm(s.acceleration, axis=1).max() <= LIMITS.a_max * (1 + 1e-6)
+    # The vehicle brakes along the straight leg it was on, forward only.
+    direction = WAYPOINTS[0, :3] - START[:3]
+    direction /= np.linalg.norm(direction)
+    offsets = s.position - state.position
+    along = offsets @ direction
+    assert np.linalg.norm(offsets - along[:, None] * direction, axis=1).max() < 1e-6
+    assert np.all(np.diff(along) >= -1e-9)
+    # No longer than from the speed limit: v²/2a plus the jerk-limited ramp, under a metre.
+    assert 0.0 < along[-1] < 1.0
+    assert stop.duration < 1.5
+
+
+def test_a_stop_from_a_curving_state_ends_at_rest() -> None:
+    stop = stop_trajectory(MOVING, LIMITS)
+    end = stop.sample(stop.duration)
+    assert np.linalg.norm(end.velocity) < 1e-9
+    assert np.linalg.norm(end.acceleration) < 1e-9
+    s = sample_densely(stop, dt=0.005)
+    assert np.linalg.norm(s.velocity, axis=1).max() <= LIMITS.v_max * (1 + 1e-6)
+    assert stop.duration < 2.0
+
+
+def test_positions_can_start_part_way() -> None:
+    traj = plan_trajectory_from(MOVING, np.array([[-2.0, 1.0, 1.2, 2.5]]), LIMITS)
+    points = traj.positions(traj.duration, 0.01, start=1.0)
+    assert points[0] == pytest.approx(traj.sample(1.0).position)
+    assert points[-1] == pytest.approx([-2.0, 1.0, 1.2])
