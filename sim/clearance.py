@@ -94,16 +94,6 @@ def _clearance_box(
             for k in range(depth):
                 out[i, j, lo2 + k] = state[i, j, lo2 + k] == _FREE and best[k] >= min_sq
 
-def clearance_window(radius_m: float, voxel_size: float) -> tuple[int, float]:
-    """The traversability rule in voxel units: (margin, min_sq). Only obstacle centres within
-    `margin` voxels per axis can be nearer than the radius, and a voxel is clear of an obstacle
-    whose squared centre distance (in voxels) is at least `min_sq`."""
-    radius_voxels = radius_m / voxel_size
-    margin = max(1, math.ceil(radius_voxels - _TOLERANCE_VOXELS))
-    min_sq = (radius_voxels - _TOLERANCE_VOXELS) ** 2 if radius_m > 0 else 0.0
-    return margin, min_sq
-
-
 class TraversabilityTracker:
     """Traversable voxels of one `OccupancyMap` for a vehicle of radius `radius_m`.
 
@@ -117,7 +107,10 @@ class TraversabilityTracker:
             raise ValueError("radius_m must be non-negative")
         self._map = occupancy
         self._radius_m = float(radius_m)
-        self._margin, self._min_sq = clearance_window(self._radius_m, occupancy.voxel_size)
+        self._radius_voxels = self._radius_m / occupancy.voxel_size
+        # Obstacles closer than the radius lie within this many voxels on every axis.
+        self._margin = max(1, math.ceil(self._radius_voxels - _TOLERANCE_VOXELS))
+        self._min_sq = (self._radius_voxels - _TOLERANCE_VOXELS) ** 2 if radius_m > 0 else 0.0
         self._subscription = occupancy.subscribe()
         self._traversable = np.zeros(occupancy.shape, dtype=bool)
         self.full_recompute()

@@ -43,8 +43,8 @@ class EpisodeConfig(BaseModel):
     )
     safety_stops: bool = Field(
         True,
-        description="brake to a stop when an occupancy update finds an obstacle within the "
-        "safety radius of the rest of the path being flown",
+        description="brake to a stop when an occupancy update finds an obstacle the vehicle "
+        "could touch on the rest of the path being flown",
     )
     planning_time_charge: Literal["wall", "none"] = Field(
         "wall",

@@ -7,7 +7,6 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-from sim.clearance import clearance_window
 from sim.occupancy import VoxelState
 
 _OCCUPIED = np.uint8(VoxelState.OCCUPIED)
@@ -67,55 +66,43 @@ def plan_is_clear(
 
 
 @numba.njit(cache=True)
-def _new_obstacle_near(
-    state: npt.NDArray[np.uint8], before: npt.NDArray[np.uint8], i: int, j: int, k: int,
-    margin: int, min_sq: float,
-) -> bool:
-    """Some voxel OCCUPIED in `state` but not in `before` has its centre nearer to voxel
-    (i, j, k)'s than sqrt(min_sq) voxels."""
-    nx, ny, nz = state.shape
-    for di in range(-margin, margin + 1):
-        ii = i + di
-        if ii < 0 or ii >= nx:
-            continue
-        for dj in range(-margin, margin + 1):
-            jj = j + dj
-            if jj < 0 or jj >= ny or di * di + dj * dj >= min_sq:
-                continue
-            for dk in range(-margin, margin + 1):
-                kk = k + dk
-                if kk < 0 or kk >= nz or di * di + dj * dj + dk * dk >= min_sq:
-                    continue
-                if state[ii, jj, kk] == _OCCUPIED and before[ii, jj, kk] != _OCCUPIED:
-                    return True
-    return False
-
-
-@numba.njit(cache=True)
 def _polyline_meets_new_obstacle(
     state: npt.NDArray[np.uint8], before: npt.NDArray[np.uint8], points: npt.NDArray[np.float64],
-    margin: int, min_sq: float,
+    reach: float,
 ) -> bool:
-    """`_new_obstacle_near` any voxel a quarter-voxel sample of the polyline `points` (K, 3),
-    in voxel units, falls in, as `segment_in_mask` samples it."""
+    """Some voxel OCCUPIED in `state` but not in `before` has its centre within `reach` of the
+    polyline `points` (K, 3); all in voxel units, voxel (i, j, k) centred at (i, j, k) + 0.5."""
     nx, ny, nz = state.shape
-    last_i, last_j, last_k = -1, -1, -1
+    reach_sq = reach * reach
     for n in range(points.shape[0]):
         a = points[max(n - 1, 0)]
         b = points[n]
-        length = np.sqrt(np.sum((b - a) ** 2))
-        steps = max(1, int(np.ceil(length * 4.0)))
-        for s in range(steps + 1):
-            t = s / steps
-            i = int(np.floor(a[0] + (b[0] - a[0]) * t))
-            j = int(np.floor(a[1] + (b[1] - a[1]) * t))
-            k = int(np.floor(a[2] + (b[2] - a[2]) * t))
-            if (i == last_i and j == last_j and k == last_k) or not (
-                    0 <= i < nx and 0 <= j < ny and 0 <= k < nz):
-                continue
-            last_i, last_j, last_k = i, j, k
-            if _new_obstacle_near(state, before, i, j, k, margin, min_sq):
-                return True
+        ab = b - a
+        length_sq = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2]
+        # The voxels whose centres can lie within reach of the segment: its box, grown.
+        lo0 = max(int(np.floor(min(a[0], b[0]) - reach - 0.5)), 0)
+        lo1 = max(int(np.floor(min(a[1], b[1]) - reach - 0.5)), 0)
+        lo2 = max(int(np.floor(min(a[2], b[2]) - reach - 0.5)), 0)
+        hi0 = min(int(np.ceil(max(a[0], b[0]) + reach - 0.5)), nx - 1)
+        hi1 = min(int(np.ceil(max(a[1], b[1]) + reach - 0.5)), ny - 1)
+        hi2 = min(int(np.ceil(max(a[2], b[2]) + reach - 0.5)), nz - 1)
+        for i in range(lo0, hi0 + 1):
+            for j in range(lo1, hi1 + 1):
+                for k in range(lo2, hi2 + 1):
+                    if state[i, j, k] != _OCCUPIED or before[i, j, k] == _OCCUPIED:
+                        continue
+                    c0 = i + 0.5 - a[0]
+                    c1 = j + 0.5 - a[1]
+                    c2 = k + 0.5 - a[2]
+                    t = 0.0
+                    if length_sq > 0.0:
+                        t = min(max((c0 * ab[0] + c1 * ab[1] + c2 * ab[2]) / length_sq, 0.0),
+                                1.0)
+                    d0 = c0 - t * ab[0]
+                    d1 = c1 - t * ab[1]
+                    d2 = c2 - t * ab[2]
+                    if d0 * d0 + d1 * d1 + d2 * d2 < reach_sq:
+                        return True
     return False
 
 
@@ -124,18 +111,14 @@ def path_meets_new_obstacle(
     before: npt.NDArray[np.uint8],
     origin: npt.NDArray[np.float64],
     voxel_size: float,
-    radius_m: float,
+    reach_m: float,
     points: npt.NDArray[np.float64],
 ) -> bool:
-    """Whether the polyline `points` (K, 3), world metres, now passes within `radius_m` of a
-    voxel that has turned OCCUPIED since the map was `before`, both (nx, ny, nz) `VoxelState`.
-
-    Distances are between voxel centres, as in the traversability rule, so a path `plan_is_clear`
-    accepted on `before` and flagged here would be rejected if it were planned now (unknown
-    voxels were obstacles to it already; only where it escapes from non-traversable space does
-    it pass near obstacles at all).
+    """Whether a voxel that has turned OCCUPIED since the map was `before` has its centre within
+    `reach_m` of the polyline `points` (K, 3), world metres; `state` and `before` are
+    (nx, ny, nz) `VoxelState` grids. A vehicle of radius r flying the path can touch a surface
+    in such a voxel only when its centre lies within r plus half the voxel's diagonal.
     """
-    margin, min_sq = clearance_window(radius_m, voxel_size)
     grid = (np.asarray(points, dtype=np.float64).reshape(-1, 3) - origin) / voxel_size
-    return bool(_polyline_meets_new_obstacle(state, before, np.ascontiguousarray(grid), margin,
-                                             min_sq))
+    return bool(_polyline_meets_new_obstacle(state, before, np.ascontiguousarray(grid),
+                                             reach_m / voxel_size))

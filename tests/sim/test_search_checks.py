@@ -14,24 +14,19 @@ ORIGIN = np.array([-1.0, -2.0, 0.0])
 SHAPE = (30, 24, 12)
 
 
-def _sample_voxels(points: npt.NDArray[np.float64]) -> set[tuple[int, int, int]]:
-    """The voxels quarter-voxel samples of the polyline fall in (the framework's sampling)."""
-    grid = (points - ORIGIN) / VOXEL
-    found: set[tuple[int, int, int]] = set()
-    for a, b in zip(np.vstack([grid[:1], grid[:-1]]), grid, strict=True):
-        steps = max(1, int(np.ceil(np.linalg.norm(b - a) * 4.0)))
-        for t in np.arange(steps + 1) / steps:
-            found.add(tuple(int(v) for v in np.floor(a + (b - a) * t)))  # type: ignore[misc]
-    return {v for v in found if all(0 <= v[i] < SHAPE[i] for i in range(3))}
+def _segment_distance(p: npt.NDArray[np.float64], a: npt.NDArray[np.float64],
+                      b: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    ab = b - a
+    t = np.zeros(len(p)) if not ab.any() else np.clip((p - a) @ ab / (ab @ ab), 0.0, 1.0)
+    return np.asarray(np.linalg.norm(p - (a + t[:, None] * ab), axis=1))
 
 
 def _reference(state: npt.NDArray[np.uint8], before: npt.NDArray[np.uint8],
-               points: npt.NDArray[np.float64], radius_m: float) -> bool:
+               points: npt.NDArray[np.float64], reach_m: float) -> bool:
     new = np.argwhere((state == VoxelState.OCCUPIED) & (before != VoxelState.OCCUPIED))
-    if len(new) == 0:
-        return False
-    for v in _sample_voxels(points):
-        if (np.linalg.norm(new - np.array(v), axis=1) * VOXEL < radius_m - 1e-6 * VOXEL).any():
+    centres = ORIGIN + (new + 0.5) * VOXEL
+    for a, b in zip(np.vstack([points[:1], points[:-1]]), points, strict=True):
+        if len(centres) and (_segment_distance(centres, a, b) < reach_m).any():
             return True
     return False
 
@@ -42,7 +37,7 @@ def test_matches_a_brute_force_reference(seed: int) -> None:
     before = rng.choice(np.array([0, 1, 2], dtype=np.uint8), size=SHAPE, p=[0.1, 0.85, 0.05])
     state = before.copy()
     free = np.argwhere(before == VoxelState.FREE)
-    turned = free[rng.choice(len(free), size=int(rng.integers(0, 4)), replace=False)]
+    turned = free[rng.choice(len(free), size=int(rng.integers(0, 60)), replace=False)]
     state[tuple(turned.T)] = VoxelState.OCCUPIED
     # Some occupied voxels turn free: that is no new obstacle.
     occupied = np.argwhere(before == VoxelState.OCCUPIED)
@@ -50,12 +45,12 @@ def test_matches_a_brute_force_reference(seed: int) -> None:
     state[tuple(cleared.T)] = VoxelState.FREE
     upper = ORIGIN + np.array(SHAPE) * VOXEL
     points = rng.uniform(ORIGIN - 0.2, upper + 0.2, size=(int(rng.integers(1, 5)), 3))
-    radius = float(rng.choice([0.1, 0.25, 0.45]))
-    expected = _reference(state, before, points, radius)
-    assert path_meets_new_obstacle(state, before, ORIGIN, VOXEL, radius, points) == expected
+    reach = float(rng.choice([0.1, 0.25, 0.39]))
+    expected = _reference(state, before, points, reach)
+    assert path_meets_new_obstacle(state, before, ORIGIN, VOXEL, reach, points) == expected
 
 
-def test_an_obstacle_on_the_path_is_found_and_one_beside_it_only_within_the_radius() -> None:
+def test_an_obstacle_on_the_path_is_found_and_one_beside_it_only_within_reach() -> None:
     before = np.full(SHAPE, VoxelState.FREE, dtype=np.uint8)
     path = np.array([[0.05, -1.0, 0.55], [0.05, -0.45, 0.55]])  # voxels (10, 10-15, 5)
     assert not path_meets_new_obstacle(before, before, ORIGIN, VOXEL, 0.45, path)
@@ -65,10 +60,10 @@ def test_an_obstacle_on_the_path_is_found_and_one_beside_it_only_within_the_radi
     # Already in the map the plan was checked against: not new.
     assert not path_meets_new_obstacle(on_path, on_path, ORIGIN, VOXEL, 0.45, path)
     beside = before.copy()
-    beside[14, 12, 5] = VoxelState.OCCUPIED  # 0.4 m from the path's voxel centres
+    beside[14, 12, 5] = VoxelState.OCCUPIED  # its centre 0.4 m from the path
     assert path_meets_new_obstacle(beside, before, ORIGIN, VOXEL, 0.45, path)
     assert not path_meets_new_obstacle(beside, before, ORIGIN, VOXEL, 0.3, path)
     # Past the end of the path it does not count.
     ahead = before.copy()
-    ahead[10, 20, 5] = VoxelState.OCCUPIED  # 0.5 m beyond the last voxel, along y
+    ahead[10, 20, 5] = VoxelState.OCCUPIED  # its centre 0.5 m beyond the path's end
     assert not path_meets_new_obstacle(ahead, before, ORIGIN, VOXEL, 0.45, path)
