@@ -1,7 +1,7 @@
 """Safety stops against collisions: the same runs with the in-flight check on and off.
 
     .venv/bin/python benchmarks/safety_stops.py [--cases splatplanner:offices-b,aep-v1:platform-a]
-        [--seeds 0] [--seconds S] [--jobs 2]
+        [--seeds 0] [--seconds S] [--jobs 2] [--modes on,off]
 
 By default, the seven (planner, area) runs that collided in the six-planner suite of
 `docs/RESULTS.md`, at seed 0, the default preset and the area's plateau time. Each run is one
@@ -60,7 +60,12 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=None,
                         help="simulated seconds (default: each area's plateau time)")
     parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--modes", default="on,off",
+                        help="'on', 'off' or both: run with the check on, off, or each in turn")
     args = parser.parse_args()
+    modes = [m.strip() for m in args.modes.split(",")]
+    if not modes or any(m not in ("on", "off") for m in modes):
+        parser.error(f"--modes takes on and/or off, got {args.modes!r}")
     cases = []
     for item in args.cases.split(","):
         planner, sep, area = item.strip().partition(":")
@@ -69,7 +74,7 @@ def main() -> None:
         cases.append((planner, area))
     seeds = [int(s) for s in args.seeds.split(",")]
     queue = [(p, a, seed, args.seconds, on) for p, a in cases for seed in seeds
-             for on in (True, False)]
+             for on in (m == "on" for m in modes)]
     with ProcessPoolExecutor(max_workers=args.jobs, max_tasks_per_child=1) as pool:
         runs = list(pool.map(_run, *zip(*queue, strict=True)))
     rows = [[r["planner"], r["area"], r["seed"], "on" if r["safety_stops_on"] else "off",
@@ -81,6 +86,8 @@ def main() -> None:
                                             "path m", "wall s"], rows)
     summary = {on: [r for r in runs if r["safety_stops_on"] == on] for on in (True, False)}
     for on, group in summary.items():
+        if not group:
+            continue
         crashed = sum(r["status"] == "crashed" for r in group)
         print(f"safety stops {'on' if on else 'off'}: {crashed} of {len(group)} runs crashed, "
               f"{sum(r['safety_stops'] for r in group)} stops made")
