@@ -8,7 +8,9 @@ By default, the seven (planner, area) runs that collided in the six-planner suit
 episode in its own process, `--jobs` at a time; on and off alternate in the queue, so that a
 drift in the machine's speed falls on both. The planner's wall time is charged to the simulated
 clock (as in the suite), so a run is not repeatable to the step: compare counts over several runs.
-Per run: how it ended, simulated time, coverage, F-score, safety stops, path length and wall time.
+Per run: how it ended, simulated time, coverage, F-score, safety stops, path length, wall time,
+and the wall time the check took (the `checks` frame cost: the path checks and the copy of the
+map each accepted plan is checked against), in seconds and as a share of the run.
 """
 
 from __future__ import annotations
@@ -48,6 +50,10 @@ def _run(planner: str, area_name: str, seed: int, seconds: float | None,
         "fscore": result.surface.fscore, "safety_stops": result.safety_stops,
         "collisions": result.collisions, "path_length_m": result.path_length_m,
         "wall_s": time.perf_counter() - wall0,
+        # Fused frames, as `sim_speed_areas.py` counts them: the costs are per fused frame.
+        "check_s": result.frame_costs_ms["checks"] / 1000.0 * result.simulated_until
+        * config.camera.rate_hz / min(config.occupancy_every_n_frames,
+                                      config.tsdf_every_n_frames),
     }
 
 
@@ -80,10 +86,11 @@ def main() -> None:
     rows = [[r["planner"], r["area"], r["seed"], "on" if r["safety_stops_on"] else "off",
              r["status"], f"{r['simulated_until']:.0f}", f"{100 * r['coverage']:.1f}",
              f"{100 * r['fscore']:.1f}", r["safety_stops"], f"{r['path_length_m']:.0f}",
-             f"{r['wall_s']:.0f}"] for r in runs]
+             f"{r['wall_s']:.0f}", f"{r['check_s']:.2f}",
+             f"{100 * r['check_s'] / r['wall_s']:.1f}"] for r in runs]
     print_table("Safety stops on and off", ["planner", "area", "seed", "stops", "status",
                                             "until s", "coverage %", "F %", "stops made",
-                                            "path m", "wall s"], rows)
+                                            "path m", "wall s", "check s", "check %"], rows)
     summary = {on: [r for r in runs if r["safety_stops_on"] == on] for on in (True, False)}
     for on, group in summary.items():
         if not group:

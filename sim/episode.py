@@ -74,12 +74,13 @@ class _Costs:
     physics: float = 0.0
     planner: float = 0.0
     metrics: float = 0.0
+    checks: float = 0.0  # the in-flight check of the rest of the path (safety stops)
     frames: int = 0
 
     def per_frame_ms(self) -> dict[str, float]:
         n = max(self.frames, 1)
         return {k: 1000.0 * getattr(self, k) / n for k in
-                ("render", "occupancy", "tsdf", "physics", "planner", "metrics")}
+                ("render", "occupancy", "tsdf", "physics", "planner", "metrics", "checks")}
 
 
 @dataclass
@@ -392,7 +393,9 @@ class _EpisodeRunner:
             stop_leg = min(int(np.searchsorted(traj.leg_end_times, plan.horizon_s - 1e-9)),
                            traj.leg_count - 1)
         outcome = PlanOutcome.REACHED if clear == len(plan.waypoints) else PlanOutcome.BLOCKED
+        t0 = time.perf_counter()
         checked_on = self.mapping.occupancy.copy_state() if self.cfg.safety_stops else None
+        self.costs.checks += time.perf_counter() - t0
         flight = _Flight(traj, self.world.time, float(traj.leg_end_times[stop_leg]), stop_leg,
                          checked_on=checked_on, checked_at_update=self.occupancy_updates)
         flight.schedule_replan(self.world.time, replan)
@@ -407,13 +410,16 @@ class _EpisodeRunner:
                 or flight.checked_at_update == self.occupancy_updates):
             return False
         flight.checked_at_update = self.occupancy_updates
+        t0 = time.perf_counter()
         occ = self.mapping.occupancy
         # Only what the vehicle could touch: a surface in a voxel lies within half the voxel's
         # diagonal of its centre. Stopping for everything within the safety radius stopped
         # flights dozens of times a run for walls 0.4-0.5 m beside the path.
         reach = self.cfg.limits.radius_m + 0.5 * math.sqrt(3.0) * occ.voxel_size
-        return path_meets_new_obstacle(occ.state, flight.checked_on, occ.origin, occ.voxel_size,
-                                       reach, self._rest_of_path(flight))
+        blocked = path_meets_new_obstacle(occ.state, flight.checked_on, occ.origin,
+                                          occ.voxel_size, reach, self._rest_of_path(flight))
+        self.costs.checks += time.perf_counter() - t0
+        return blocked
 
     def _rest_of_path(self, flight: _Flight) -> npt.NDArray[np.float64]:
         """(K, 3) the path still to fly: the reference position, then samples of a curved first
