@@ -190,10 +190,7 @@ def stop_trajectory(state: TrajectorySample, limits: VehicleLimits) -> Trajector
     inp.current_acceleration = accel.tolist()
     inp.target_velocity = [0.0, 0.0, 0.0, 0.0]
     inp.target_acceleration = [0.0, 0.0, 0.0, 0.0]
-    inp.max_velocity = [*np.maximum(limits.v_max * weights, _MIN_LIMIT), limits.yaw_rate_max]
-    inp.max_acceleration = [*np.maximum(limits.a_max * weights, _MIN_LIMIT),
-                            limits.yaw_acc_max]
-    inp.max_jerk = [*np.maximum(limits.j_max * weights, _MIN_LIMIT), limits.yaw_jerk_max]
+    _set_limits(inp, weights, limits)
     # Phase synchronisation keeps a straight flight braking on its line; ruckig falls back to
     # time synchronisation when the motion is not along one line.
     inp.synchronization = Synchronization.Phase
@@ -203,6 +200,14 @@ def stop_trajectory(state: TrajectorySample, limits: VehicleLimits) -> Trajector
         raise TrajectoryError(f"ruckig could not stop from {start.tolist()}: {result}")
     end, _, _ = traj.at_time(traj.duration)
     return Trajectory([traj], np.array([end], dtype=np.float64), curved_first_leg=True)
+
+
+def _set_limits(inp: InputParameter, weights: FloatArray, limits: VehicleLimits) -> None:
+    """Per-axis limits of a 4-DoF input: the translation norm limits times `weights` (3,), each
+    at least ruckig's smallest, and the yaw limits as they are."""
+    inp.max_velocity = [*np.maximum(limits.v_max * weights, _MIN_LIMIT), limits.yaw_rate_max]
+    inp.max_acceleration = [*np.maximum(limits.a_max * weights, _MIN_LIMIT), limits.yaw_acc_max]
+    inp.max_jerk = [*np.maximum(limits.j_max * weights, _MIN_LIMIT), limits.yaw_jerk_max]
 
 
 def _axis_weights(
@@ -245,10 +250,7 @@ def _moving_leg(
     inp.current_velocity = velocity.tolist()
     inp.current_acceleration = acceleration.tolist()
     inp.target_position = target.tolist()
-    inp.max_velocity = [*np.maximum(limits.v_max * weights, _MIN_LIMIT), limits.yaw_rate_max]
-    inp.max_acceleration = [*np.maximum(limits.a_max * weights, _MIN_LIMIT),
-                            limits.yaw_acc_max]
-    inp.max_jerk = [*np.maximum(limits.j_max * weights, _MIN_LIMIT), limits.yaw_jerk_max]
+    _set_limits(inp, weights, limits)
     inp.synchronization = Synchronization.Time
     traj = RuckigTrajectory(4)
     result = otg.calculate(inp, traj)
@@ -266,9 +268,7 @@ def _leg(
     inp = InputParameter(4)
     inp.current_position = start.tolist()
     inp.target_position = target.tolist()
-    inp.max_velocity = [*np.maximum(limits.v_max * cosines, _MIN_LIMIT), limits.yaw_rate_max]
-    inp.max_acceleration = [*np.maximum(limits.a_max * cosines, _MIN_LIMIT), limits.yaw_acc_max]
-    inp.max_jerk = [*np.maximum(limits.j_max * cosines, _MIN_LIMIT), limits.yaw_jerk_max]
+    _set_limits(inp, cosines, limits)
     inp.synchronization = Synchronization.Phase
     traj = RuckigTrajectory(4)
     result = otg.calculate(inp, traj)
