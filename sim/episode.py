@@ -406,8 +406,8 @@ class _EpisodeRunner:
         touch on the rest of the flight's path. Thin surfaces seen from afar can be cleared
         from the map by the rays that pass them and found again nearer, on a path already
         accepted, so the map is not trusted only once, when the plan is checked."""
-        if (not self.cfg.safety_stops or flight.checked_on is None
-                or flight.checked_at_update == self.occupancy_updates):
+        # Flights start unguarded (`checked_on` None) when the preset turns safety stops off.
+        if flight.checked_on is None or flight.checked_at_update == self.occupancy_updates:
             return False
         flight.checked_at_update = self.occupancy_updates
         t0 = time.perf_counter()

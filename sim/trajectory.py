@@ -59,7 +59,9 @@ class Trajectory:
                  curved_first_leg: bool = False) -> None:
         self._legs = legs
         self.waypoints = waypoints
-        self._curved_first_leg = curved_first_leg
+        # True when the first leg starts moving (`plan_trajectory_from`, `stop_trajectory`): it
+        # need not follow the segment to its waypoint.
+        self.curved_first_leg = curved_first_leg
         durations = np.array([leg.duration for leg in legs], dtype=np.float64)
         self.leg_end_times = np.cumsum(durations)
         self.duration = float(self.leg_end_times[-1]) if legs else 0.0
@@ -71,12 +73,6 @@ class Trajectory:
     def leg_index(self, t: float) -> int:
         """Index of the leg active at time t (clamped)."""
         return min(int(np.searchsorted(self.leg_end_times, t, side="right")), len(self._legs) - 1)
-
-    @property
-    def curved_first_leg(self) -> bool:
-        """True when the first leg starts moving (`plan_trajectory_from`, `stop_trajectory`):
-        it need not follow the segment to its waypoint."""
-        return self._curved_first_leg
 
     def positions(self, until: float, dt: float, start: float = 0.0) -> FloatArray:
         """(K, 3) reference positions every `dt` seconds from `start` to `until` (both clamped
@@ -151,12 +147,7 @@ def plan_trajectory_from(
     legs are straight rest-to-rest legs as in `plan_trajectory`.
     """
     wps = _check_waypoints(waypoints)
-    start = np.array([*state.position, state.yaw], dtype=np.float64)
-    moving = np.array([*state.velocity, state.yaw_rate], dtype=np.float64)
-    accel = np.array([*state.acceleration, 0.0], dtype=np.float64)
-    if not (np.all(np.isfinite(start)) and np.all(np.isfinite(moving))
-            and np.all(np.isfinite(accel))):
-        raise TrajectoryError("the start state must be finite")
+    start, moving, accel = _moving_state(state)
     otg = Ruckig(4)
     first = _short_yaw(float(start[3]), wps[0])
     legs = [_moving_leg(otg, start, moving, accel, first, limits)]
@@ -174,12 +165,7 @@ def stop_trajectory(state: TrajectorySample, limits: VehicleLimits) -> Trajector
 
     Its one waypoint is where the vehicle comes to rest.
     """
-    moving = np.array([*state.velocity, state.yaw_rate], dtype=np.float64)
-    accel = np.array([*state.acceleration, 0.0], dtype=np.float64)
-    start = np.array([*state.position, state.yaw], dtype=np.float64)
-    if not (np.all(np.isfinite(start)) and np.all(np.isfinite(moving))
-            and np.all(np.isfinite(accel))):
-        raise TrajectoryError("the start state must be finite")
+    start, moving, accel = _moving_state(state)
     speed = float(np.linalg.norm(moving[:3]))
     heading = np.abs(moving[:3]) / speed if speed > 1e-9 else np.zeros(3)
     weights = _axis_weights(heading, moving[:3], accel[:3], limits)
@@ -200,6 +186,18 @@ def stop_trajectory(state: TrajectorySample, limits: VehicleLimits) -> Trajector
         raise TrajectoryError(f"ruckig could not stop from {start.tolist()}: {result}")
     end, _, _ = traj.at_time(traj.duration)
     return Trajectory([traj], np.array([end], dtype=np.float64), curved_first_leg=True)
+
+
+def _moving_state(state: TrajectorySample) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(4,) position and yaw, (4,) velocity and yaw rate, (4,) acceleration (yaw: 0) of a
+    moving state, checked finite."""
+    start = np.array([*state.position, state.yaw], dtype=np.float64)
+    moving = np.array([*state.velocity, state.yaw_rate], dtype=np.float64)
+    accel = np.array([*state.acceleration, 0.0], dtype=np.float64)
+    if not (np.all(np.isfinite(start)) and np.all(np.isfinite(moving))
+            and np.all(np.isfinite(accel))):
+        raise TrajectoryError("the start state must be finite")
+    return start, moving, accel
 
 
 def _set_limits(inp: InputParameter, weights: FloatArray, limits: VehicleLimits) -> None:
