@@ -1,12 +1,12 @@
 """Mesh import: real COLLADA buildings, synthetic boxes in every format, and each invalid case.
 
-The real meshes in ``shared/meshes`` are the Gazebo model database models ``cafe`` and
-``apartment`` by Nate Koenig, licensed under Creative Commons Attribution 3.0 Unported.
+The real meshes in ``tests/data/meshes`` are the Gazebo model database models ``cafe`` and
+``apartment`` by Nate Koenig, licensed under Creative Commons Attribution 3.0 Unported (see the
+README.md beside them).
 """
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -18,12 +18,7 @@ from areas.area import Area, StartPose
 from areas.ground_truth import compute_ground_truth
 from areas.importer import ImportLimits, MeshImportError, import_mesh
 
-MESHES = Path(__file__).resolve().parents[3] / "shared" / "meshes"
-# CI always has shared/ beside the clone: there a missing folder fails instead of skipping.
-_MESHES_MISSING = not MESHES.is_dir() and os.environ.get("CI") != "true"
-needs_meshes = pytest.mark.skipif(
-    _MESHES_MISSING, reason=f"shared mesh folder {MESHES} is absent (outside CI)"
-)
+MESHES = Path(__file__).resolve().parents[1] / "data" / "meshes"
 
 
 @pytest.fixture(autouse=True)
@@ -33,8 +28,6 @@ def _no_cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
 
 @pytest.fixture(scope="module")
 def cafe() -> Area:
-    if _MESHES_MISSING:
-        pytest.skip(f"shared mesh folder {MESHES} is absent (outside CI)")
     return import_mesh(MESHES / "cafe.dae", "cafe")
 
 
@@ -65,20 +58,17 @@ def _check_real(area: Area, expected: tuple[float, float, float]) -> None:
     assert compute_ground_truth(area).observable_volume_m3 > 0.0
 
 
-@needs_meshes
 def test_cafe_imports_in_metres(cafe: Area) -> None:
     _check_real(cafe, (10.0, 24.0, 2.9))
     assert cafe.info.levels == 1
 
 
-@needs_meshes
 def test_apartment_imports_in_metres() -> None:
     area = import_mesh(MESHES / "apartment.dae", "apartment")
     _check_real(area, (20.0, 22.0, 15.0))
     assert area.info.levels >= 2
 
 
-@needs_meshes
 def test_short_flight_in_the_cafe(cafe: Area) -> None:
     from planners.registry import make
     from sim.config import preset
