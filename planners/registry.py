@@ -1,18 +1,43 @@
-"""The planner registry: every planner registers here under a versioned name.
+"""The planner registry: every planner registers here under a versioned id.
 
-Names look like ``classic-v1``; asking for ``classic`` gives the highest registered version.
+Ids look like ``classic-v1``: a name (lower case letters, digits, ``_`` and ``-``, starting with
+a letter) and a version. `parse_id` and `format_id` are the one definition of that grammar.
+Lookups (`spec`, `make`) ignore case and surrounding white space; asking for ``classic`` gives
+its highest registered version. Registration takes the canonical lower-case name only, so a
+name is spelt one way wherever it is stored.
+
+Where planners come from, in this order:
+
+- the built-in planners (`planners.builtin`), registered before anything else: the first
+  `register` call or the first lookup registers them, whichever comes first;
+- third-party packages, through entry points of the group ``flybo.planners``. Each entry point
+  names a module, whose import registers its planners, or a callable, called once without
+  arguments, that registers them. They are loaded once, at the first lookup; a failing one
+  raises `PlannerPluginError` naming it, at that lookup and every later one;
+- `register` called directly, at any time.
+
+A registered id is never replaced: stored results name the code they were made with, so a
+changed planner is registered under a new version (see `flybo.versions`).
 """
 
 from __future__ import annotations
 
+import difflib
 import re
+import threading
+import types
 from collections.abc import Mapping
 from dataclasses import dataclass
+from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
 from pydantic import ValidationError
 
 from planners.api import Planner, PlannerConfig
+
+ENTRY_POINT_GROUP = "flybo.planners"
+BUILTIN = "builtin"
+DIRECT = "direct"
 
 _ID = re.compile(r"^(?P<name>[a-z][a-z0-9_-]*?)(?:-v(?P<version>\d+))?$")
 
@@ -20,31 +45,79 @@ _ID = re.compile(r"^(?P<name>[a-z][a-z0-9_-]*?)(?:-v(?P<version>\d+))?$")
 class UnknownPlannerError(ValueError):
     """No planner is registered under the requested name."""
 
+    def __init__(self, message: str, *, suggestions: list[str], known: list[str]) -> None:
+        super().__init__(message)
+        self.suggestions = suggestions
+        self.known = known
+
 
 class PlannerConfigError(ValueError):
     """The configuration given for a planner is invalid."""
 
 
+class PlannerPluginError(RuntimeError):
+    """An entry point of the group ``flybo.planners`` failed to load."""
+
+
 @dataclass(frozen=True)
 class PlannerSpec:
-    """One registered planner version."""
+    """One registered planner version.
+
+    `origin` is ``"builtin"``, ``"entry point <name> = <value>"`` or ``"direct"`` (a `register`
+    call outside both).
+    """
 
     name: str
     version: int
     cls: type[Planner]
     description: str
     reference: str
+    origin: str = DIRECT
 
     @property
     def id(self) -> str:
-        return f"{self.name}-v{self.version}"
+        return format_id(self.name, self.version)
+
+    @property
+    def builtin(self) -> bool:
+        return self.origin == BUILTIN
 
     @property
     def config_model(self) -> type[PlannerConfig]:
         return self.cls.config_model
 
 
+def format_id(name: str, version: int) -> str:
+    """The id of version `version` of planner `name`: ``name-vN``."""
+    return f"{name}-v{version}"
+
+
+def parse_id(text: str) -> tuple[str, int | None]:
+    """(name, version) of ``name-vN``, or (name, None) of a bare name; case and surrounding
+    white space are ignored.
+
+    Raises:
+        ValueError: when `text` is no planner id.
+    """
+    match = _ID.match(_normalise(text))
+    if match is None:
+        raise ValueError(f"malformed planner id {text!r}: expected name-vN, e.g. classic-v1")
+    version = match.group("version")
+    return match.group("name"), None if version is None else int(version)
+
+
+def _normalise(text: str) -> str:
+    return text.strip().lower()
+
+
 _REGISTRY: dict[str, dict[int, PlannerSpec]] = {}
+# Reentrant: loading the built-ins or a plugin calls `register`, and a plugin may look up others.
+_LOCK = threading.RLock()
+_origin = DIRECT  # the origin given to registrations, set while built-ins or a plugin load
+_builtins_loaded = False
+_plugins_loaded = False
+_plugins_loading = False
+_plugin_error: PlannerPluginError | None = None
 
 
 def register(
@@ -53,49 +126,175 @@ def register(
     """Register `cls` as `name-v{version}`; registering the same id twice is an error."""
     if isinstance(version, bool) or not isinstance(version, int) or version < 0:
         raise ValueError(f"invalid version {version!r} for planner {name!r}: an integer >= 0")
-    match = _ID.match(name)
+    match = _ID.match(name) if isinstance(name, str) else None
     if match is None or match.group("version") is not None:
-        raise ValueError(f"invalid planner name {name!r}: lower case, no version suffix")
-    versions = _REGISTRY.setdefault(name, {})
-    if version in versions:
-        raise ValueError(f"planner {name}-v{version} is already registered")
-    spec = PlannerSpec(name, version, cls, description, reference)
-    versions[version] = spec
-    return spec
+        hint = ""
+        if isinstance(name, str) and _ID.match(_normalise(name)) and _normalise(name) != name:
+            hint = f" (did you mean {_normalise(name)!r}?)"
+        raise ValueError(
+            f"invalid planner name {name!r}: lower case letters, digits, '_' and '-', starting "
+            f"with a letter, without a version suffix{hint}"
+        )
+    if not (isinstance(cls, type) and issubclass(cls, Planner)):
+        raise TypeError(f"planner {format_id(name, version)}: {cls!r} is not a Planner subclass")
+    with _LOCK:
+        _ensure_builtins()
+        existing = _REGISTRY.get(name, {}).get(version)
+        if existing is not None:
+            raise ValueError(
+                f"planner {existing.id} is already registered ({existing.origin}); "
+                "a changed planner needs a new version"
+            )
+        spec_ = PlannerSpec(name, version, cls, description, reference, _origin)
+        _REGISTRY.setdefault(name, {})[version] = spec_
+        return spec_
+
+
+def _snapshot() -> dict[str, dict[int, PlannerSpec]]:
+    return {name: dict(versions) for name, versions in _REGISTRY.items()}
+
+
+def _restore(snapshot: dict[str, dict[int, PlannerSpec]]) -> None:
+    _REGISTRY.clear()
+    _REGISTRY.update(snapshot)
 
 
 def _ensure_builtins() -> None:
-    # Imported lazily so that the registry module has no import cycle with the planners.
-    import planners.builtin  # noqa: F401
+    """Register the built-in planners once, before any other; all of them or none."""
+    global _builtins_loaded, _origin
+    with _LOCK:
+        if _builtins_loaded or _origin == BUILTIN:
+            return
+        # Imported here: the planner modules import this one.
+        from planners.builtin import register_builtins
+
+        before, previous = _snapshot(), _origin
+        _origin = BUILTIN
+        try:
+            register_builtins()
+        except BaseException:
+            _restore(before)
+            raise
+        finally:
+            _origin = previous
+        _builtins_loaded = True
+
+
+def _entry_point_label(ep: EntryPoint) -> str:
+    dist = getattr(ep, "dist", None)
+    where = f" (distribution {dist.name} {dist.version})" if dist is not None else ""
+    return f"{ep.name} = {ep.value}{where}"
+
+
+def _load_entry_point(ep: EntryPoint) -> None:
+    global _origin
+    before, previous = _snapshot(), _origin
+    _origin = f"entry point {ep.name} = {ep.value}"
+    try:
+        target = ep.load()
+        if isinstance(target, types.ModuleType):
+            pass  # importing the module registered its planners
+        elif callable(target):
+            target()
+        else:
+            raise TypeError(f"it names a {type(target).__name__}, neither a module nor a callable")
+    except Exception as exc:
+        _restore(before)  # none of its planners, rather than some
+        raise PlannerPluginError(
+            f"loading planner entry point {_entry_point_label(ep)!r} of group "
+            f"{ENTRY_POINT_GROUP!r} failed: {type(exc).__name__}: {exc}"
+        ) from exc
+    finally:
+        _origin = previous
+
+
+def _ensure_loaded() -> None:
+    """The built-ins, then every entry point of the group, each loaded once."""
+    global _plugins_loaded, _plugins_loading, _plugin_error
+    with _LOCK:
+        _ensure_builtins()
+        if _plugins_loading:
+            return  # a plugin looking up planners while it loads
+        if not _plugins_loaded:
+            _plugins_loading = True
+            errors: list[PlannerPluginError] = []
+            try:
+                found = entry_points(group=ENTRY_POINT_GROUP)
+                for ep in sorted(found, key=lambda e: (e.name, e.value)):
+                    try:
+                        _load_entry_point(ep)
+                    except PlannerPluginError as exc:
+                        errors.append(exc)
+            finally:
+                _plugins_loading = False
+                _plugins_loaded = True
+            if len(errors) == 1:
+                _plugin_error = errors[0]
+            elif errors:
+                _plugin_error = PlannerPluginError("; ".join(str(e) for e in errors))
+                _plugin_error.__cause__ = errors[0]
+        if _plugin_error is not None:
+            raise _plugin_error
 
 
 def planner_ids() -> list[str]:
     """Every registered id, sorted."""
-    _ensure_builtins()
-    return sorted(spec.id for versions in _REGISTRY.values() for spec in versions.values())
+    _ensure_loaded()
+    return _ids()
+
+
+def _ids() -> list[str]:
+    return sorted(spec_.id for versions in _REGISTRY.values() for spec_ in versions.values())
 
 
 def planner_names() -> list[str]:
     """Every registered name (latest versions), sorted."""
-    _ensure_builtins()
-    return sorted(_REGISTRY)
+    _ensure_loaded()
+    return sorted(name for name, versions in _REGISTRY.items() if versions)
+
+
+def specs() -> list[PlannerSpec]:
+    """Every registered spec, sorted by id."""
+    _ensure_loaded()
+    return sorted((s for versions in _REGISTRY.values() for s in versions.values()),
+                  key=lambda s: (s.name, s.version))
+
+
+def _unknown(text: str, message: str, candidates: list[str]) -> UnknownPlannerError:
+    key = _normalise(text)
+    suggestions = list(dict.fromkeys(difflib.get_close_matches(key, candidates, n=3, cutoff=0.6)))
+    known = _ids()
+    hint = f" Did you mean {' or '.join(repr(s) for s in suggestions)}?" if suggestions else ""
+    return UnknownPlannerError(
+        f"{message}.{hint} Known planners: {', '.join(known) or 'none'}.",
+        suggestions=suggestions, known=known,
+    )
 
 
 def spec(planner_id: str) -> PlannerSpec:
-    """The spec for ``name`` (latest version) or ``name-vN``."""
-    _ensure_builtins()
-    match = _ID.match(planner_id.strip().lower())
-    versions = _REGISTRY.get(match.group("name"), {}) if match else {}
-    if not versions or match is None:
-        known = ", ".join(planner_ids()) or "none"
-        raise UnknownPlannerError(f"unknown planner {planner_id!r}; known planners: {known}")
-    if match.group("version") is None:
+    """The spec for ``name`` (latest version) or ``name-vN``; case and surrounding white space
+    are ignored.
+
+    Raises:
+        UnknownPlannerError: naming the closest registered ids.
+    """
+    _ensure_loaded()
+    try:
+        name, version = parse_id(planner_id)
+    except ValueError:
+        raise _unknown(planner_id, f"unknown planner {planner_id!r}", _ids()) from None
+    versions = _REGISTRY.get(name)
+    if not versions:
+        candidates = _ids() + sorted(n for n, v in _REGISTRY.items() if v)
+        raise _unknown(planner_id, f"unknown planner {planner_id!r}", candidates)
+    if version is None:
         return versions[max(versions)]
-    version = int(match.group("version"))
     if version not in versions:
-        known = ", ".join(s.id for s in versions.values())
-        raise UnknownPlannerError(
-            f"unknown version of planner {match.group('name')!r}: v{version}; known: {known}"
+        ids = [versions[v].id for v in sorted(versions)]
+        raise _unknown(
+            planner_id,
+            f"unknown version of planner {name!r}: v{version} (known: {', '.join(ids)})",
+            ids,
         )
     return versions[version]
 

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import sys
+import textwrap
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
@@ -180,3 +183,213 @@ def test_register_invalid_name_raises(name: str) -> None:
         # Never leave a stray entry behind, even if the registry wrongly accepted the name.
         for key in set(registry._REGISTRY) - set(before):
             registry._REGISTRY.pop(key, None)
+
+
+# -- ids -----------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [("classic-v1", ("classic", 1)), (" AEP-V2 ", ("aep", 2)), ("esm-ipp", ("esm-ipp", None)),
+     ("esm-recon-v1", ("esm-recon", 1)), ("a_b-v10", ("a_b", 10))],
+)
+def test_parse_id(text: str, expected: tuple[str, int | None]) -> None:
+    assert registry.parse_id(text) == expected
+    name, version = expected
+    if version is not None:
+        assert registry.format_id(name, version) == text.strip().lower()
+
+
+@pytest.mark.parametrize("text", ["", "9lives", "classic v1", "-v1"])
+def test_parse_id_rejects_malformed_ids(text: str) -> None:
+    with pytest.raises(ValueError, match="malformed planner id"):
+        registry.parse_id(text)
+
+
+def test_register_suggests_the_lower_case_name() -> None:
+    with pytest.raises(ValueError, match="did you mean 'zzregistrytestupper'"):
+        register("ZzRegistryTestUpper", 1, _Throwaway, description="bad name")
+
+
+def test_register_rejects_a_class_that_is_no_planner(throwaway: str) -> None:
+    with pytest.raises(TypeError, match="not a Planner subclass"):
+        register(throwaway, 2, dict, description="no planner")  # type: ignore[arg-type]
+    assert f"{throwaway}-v2" not in planner_ids()
+
+
+# -- suggestions ---------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("text", "suggested"),
+    [("clasic", "classic"), ("CLASIC-V1", "classic-v1"), ("nbvp2", "nbvp"),
+     ("esm-recn", "esm-recon"), ("splat-planner", "splatplanner")],
+)
+def test_unknown_name_suggests_the_closest_known(text: str, suggested: str) -> None:
+    with pytest.raises(UnknownPlannerError) as info:
+        spec(text)
+    assert suggested in info.value.suggestions
+    assert f"did you mean '{suggested}'" in str(info.value).lower()
+    assert info.value.known == planner_ids()
+
+
+def test_unknown_version_suggests_the_known_versions() -> None:
+    with pytest.raises(UnknownPlannerError) as info:
+        spec("aep-v3")
+    assert set(info.value.suggestions) <= {"aep-v1", "aep-v2"}
+    assert info.value.suggestions
+    assert "aep-v1, aep-v2" in str(info.value)
+
+
+def test_far_from_everything_suggests_nothing() -> None:
+    with pytest.raises(UnknownPlannerError) as info:
+        spec("qqqqqqqqqqqq")
+    assert info.value.suggestions == []
+    assert "did you mean" not in str(info.value).lower()
+
+
+# -- load order ----------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def fresh_registry(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    """The registry as a new process sees it: nothing registered or loaded yet. The real state
+    comes back afterwards."""
+    monkeypatch.setattr(registry, "_REGISTRY", {})
+    monkeypatch.setattr(registry, "_builtins_loaded", False)
+    monkeypatch.setattr(registry, "_plugins_loaded", False)
+    monkeypatch.setattr(registry, "_plugin_error", None)
+    yield
+
+
+@pytest.mark.usefixtures("fresh_registry")
+def test_register_before_the_first_lookup_keeps_the_builtins() -> None:
+    register(THROWAWAY, 1, _Throwaway, description="registered first")
+    assert spec("classic-v1").cls is Classic
+    assert spec(THROWAWAY).description == "registered first"
+    assert {"classic-v1", "aep-v1", "aep-v2", f"{THROWAWAY}-v1"} <= set(planner_ids())
+    assert spec("classic").origin == registry.BUILTIN and spec("classic").builtin
+    assert spec(THROWAWAY).origin == registry.DIRECT and not spec(THROWAWAY).builtin
+
+
+@pytest.mark.usefixtures("fresh_registry")
+def test_register_of_a_builtin_id_before_the_first_lookup_fails_at_once() -> None:
+    with pytest.raises(ValueError, match="classic-v1 is already registered"):
+        register("classic", 1, _Throwaway, description="shadowing the built-in")
+    assert spec("classic-v1").cls is Classic
+
+
+@pytest.mark.usefixtures("fresh_registry")
+def test_builtins_register_all_or_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
+    import planners.builtin as builtin
+
+    broken = (*builtin.BUILTINS, ("classic", 1, _Throwaway, "duplicate", ""))
+    monkeypatch.setattr(builtin, "BUILTINS", broken)
+    with pytest.raises(ValueError, match="already registered"):
+        planner_ids()
+    assert registry._REGISTRY == {}
+    monkeypatch.setattr(builtin, "BUILTINS", broken[:-1])
+    assert "classic-v1" in planner_ids()
+
+
+# -- entry points ----------------------------------------------------------------------------------
+
+
+def _distribution(root: Path, module: str, source: str, entry_points: str) -> None:
+    """An installed distribution in `root`: its module and a dist-info folder."""
+    (root / f"{module}.py").write_text(textwrap.dedent(source), encoding="utf-8")
+    info = root / f"{module}-1.0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(
+        f"Metadata-Version: 2.1\nName: {module.replace('_', '-')}\nVersion: 1.0\n",
+        encoding="utf-8")
+    (info / "entry_points.txt").write_text(
+        f"[{registry.ENTRY_POINT_GROUP}]\n{textwrap.dedent(entry_points)}", encoding="utf-8")
+
+
+_PLUGIN = '''
+from planners.api import Plan, Planner
+from planners.registry import register, spec
+
+CALLS = []
+
+
+class Wanderer(Planner):
+    def plan(self, obs):
+        return Plan.finished("plugin")
+
+
+def register_planners():
+    CALLS.append(1)
+    assert spec("classic").id == "classic-v1"  # the built-ins come first
+    register("zz-wanderer", 1, Wanderer, description="from a plugin")
+    register("zz-wanderer", 2, Wanderer, description="from a plugin, v2")
+'''
+
+
+@pytest.fixture
+def plugin_root(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                fresh_registry: None) -> Iterator[Path]:
+    """A folder on sys.path for distributions; their modules are forgotten afterwards."""
+    monkeypatch.syspath_prepend(str(tmp_path))
+    before = set(sys.modules)
+    yield tmp_path
+    for name in set(sys.modules) - before:
+        if name.startswith("zz_"):
+            del sys.modules[name]
+
+
+def test_entry_point_callable_registers_planners_once(plugin_root: Path) -> None:
+    _distribution(plugin_root, "zz_flybo_plugin", _PLUGIN,
+                  "wanderer = zz_flybo_plugin:register_planners\n")
+    found = spec("ZZ-Wanderer")
+    assert found.id == "zz-wanderer-v2"
+    assert found.origin == "entry point wanderer = zz_flybo_plugin:register_planners"
+    assert not found.builtin
+    assert spec("zz-wanderer-v1").description == "from a plugin"
+    assert {"zz-wanderer-v1", "zz-wanderer-v2", "classic-v1"} <= set(planner_ids())
+    assert make("zz-wanderer").plan is not None
+    assert sys.modules["zz_flybo_plugin"].CALLS == [1]  # loaded once, not at each lookup
+
+
+def test_entry_point_module_registers_on_import(plugin_root: Path) -> None:
+    source = _PLUGIN + "\nregister_planners()\n"
+    _distribution(plugin_root, "zz_flybo_module_plugin", source,
+                  "wanderer = zz_flybo_module_plugin\n")
+    assert spec("zz-wanderer").id == "zz-wanderer-v2"
+
+
+def test_entry_points_are_loaded_lazily(plugin_root: Path) -> None:
+    register(THROWAWAY, 1, _Throwaway, description="registering loads no plugin")
+    _distribution(plugin_root, "zz_flybo_plugin", _PLUGIN,
+                  "wanderer = zz_flybo_plugin:register_planners\n")
+    assert "zz_flybo_plugin" not in sys.modules
+    assert "zz-wanderer" in planner_names()
+
+
+@pytest.mark.parametrize(
+    ("source", "target", "why"),
+    [
+        ("raise RuntimeError('boom')", "zz_flybo_broken:nothing", "RuntimeError: boom"),
+        ("x = 1", "zz_flybo_broken:missing", "AttributeError"),
+        ("x = 1", "zz_flybo_broken:x", "neither a module nor a callable"),
+        (_PLUGIN + "\ndef twice():\n    register_planners()\n    register_planners()\n",
+         "zz_flybo_broken:twice", "already registered"),
+    ],
+)
+def test_failing_entry_point_is_named_in_the_error(
+    plugin_root: Path, source: str, target: str, why: str,
+) -> None:
+    _distribution(plugin_root, "zz_flybo_broken", source, f"broken = {target}\n")
+    with pytest.raises(registry.PlannerPluginError) as info:
+        spec("classic")
+    message = str(info.value)
+    assert f"broken = {target}" in message
+    assert "zz-flybo-broken 1.0" in message
+    assert registry.ENTRY_POINT_GROUP in message
+    assert why in message
+    # Every later lookup fails the same way, and the plugin left no planner half registered.
+    with pytest.raises(registry.PlannerPluginError, match=f"broken = {target}"):
+        planner_ids()
+    assert "zz-wanderer" not in registry._REGISTRY or not registry._REGISTRY["zz-wanderer"]
+    assert "classic" in registry._REGISTRY
