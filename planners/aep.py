@@ -6,14 +6,19 @@ worth `zero_gain`, the cached nodes are re-evaluated on the current map (best fi
 cached gain discounted by the straight-line distance, an upper bound of their worth) and the
 vehicle flies a shortest grid path to the one with the best gain * exp(-lambda * path length).
 When no cached node gains more than `zero_gain`, Classic's nearest frontier takes over, and
-Classic's own end condition ends the exploration.
+Classic's own end condition ends the exploration (aep-v2); aep-v1 ends the exploration there.
+
+Both versions are one class, `AepPlanner`, configured by `AepBaseConfig`; a version is a config
+model that sets the defaults of the settings it differs in (`fallback` only, so far), and neither
+is a subclass of the other. A later change of behaviour is a new setting whose default in
+`AepV1Config` and `AepConfig` keeps what they do, and a new version that sets it.
 """
 
 from __future__ import annotations
 
 import heapq
 import math
-from typing import Literal
+from typing import ClassVar, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -28,9 +33,10 @@ from planners.spatial import SpatialIndex
 FloatArray = npt.NDArray[np.float64]
 
 
-class AepConfig(NbvpConfig):
-    """AEP's settings. Unless noted, defaults are those of the public AEP configuration the
-    benchmark's authors used on MAZE (`aep/...` keys of its `maze.yaml`)."""
+class AepBaseConfig(NbvpConfig):
+    """AEP's settings shared by its versions. Unless noted, defaults are those of the public
+    AEP configuration the benchmark's authors used on MAZE (`aep/...` keys of its `maze.yaml`).
+    Settings the versions differ in have no default here: each version's model sets it."""
 
     # aep/tree/extension_range: 1.5
     extension_m: float = Field(1.5, gt=0.0)
@@ -59,14 +65,31 @@ class AepConfig(NbvpConfig):
     ray_step_deg: float = Field(10.0, gt=0.0, le=30.0)
     # Our choice: one cached node per half metre keeps the cache small; AEP caches every node.
     cache_spacing_m: float = Field(0.5, gt=0.0)
-    # Our choice: when the cache runs dry, Classic's nearest frontier (see `_fall_back`);
-    # None ends the exploration there, as aep-v1 did.
+    # When the cache runs dry: Classic's nearest frontier with these settings (see
+    # `_fall_back`), or None, which ends the exploration there.
+    fallback: ClassicConfig | None
+
+
+class AepV1Config(AepBaseConfig):
+    """aep-v1: the exploration ends when the cache runs dry."""
+
+    fallback: ClassicConfig | None = None
+
+
+class AepConfig(AepBaseConfig):
+    """AEP's settings. Unless noted, defaults are those of the public AEP configuration the
+    benchmark's authors used on MAZE (`aep/...` keys of its `maze.yaml`)."""
+
+    # aep-v2, our choice: Classic's nearest frontier when the cache runs dry.
     fallback: ClassicConfig | None = ClassicConfig()
 
 
-class Aep(Nbvp):
-    config_model = AepConfig
-    config: AepConfig
+class AepPlanner(Nbvp):
+    """The code of every AEP version; `config_model` picks the version (see the module's
+    docstring)."""
+
+    config_model: ClassVar[type[AepBaseConfig]] = AepBaseConfig
+    config: AepBaseConfig
 
     def reset(self, ctx: PlannerContext) -> None:
         super().reset(ctx)
@@ -152,14 +175,15 @@ class Aep(Nbvp):
         return plan
 
 
-class AepV1Config(AepConfig):
-    """aep-v1: the exploration ends when the cache runs dry."""
-
-    fallback: ClassicConfig | None = None
-
-
-class AepV1(Aep):
+class AepV1(AepPlanner):
     """aep-v1, kept registered so that its stored results stay comparable and re-runnable."""
 
     config_model = AepV1Config
     config: AepV1Config
+
+
+class Aep(AepPlanner):
+    """aep-v2."""
+
+    config_model = AepConfig
+    config: AepConfig

@@ -3,13 +3,14 @@ made by hand."""
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
 import pytest
 
 from areas import load_area, load_ground_truth
-from planners.registry import make, planner_ids
+from planners.registry import PlannerSpec, make, planner_ids, spec, specs
 from sim.camera import CameraConfig
 from sim.config import preset
 from sim.geometry import Pose
@@ -181,3 +182,35 @@ def test_classic_flies_toward_the_carved_frontier() -> None:
     assert plan.horizon_s == 0.0
     assert plan.info["clusters"] >= 1
     assert 0.0 < plan.info["path_m"] < BALL_RADIUS
+
+
+def test_versions_of_a_planner_do_not_inherit_each_other() -> None:
+    """An id keeps the code its results were made with: a newer version never subclasses an
+    older one (it would change with it), nor an older one a newer; versions share a base
+    class and differ in their configuration."""
+    by_name: dict[str, list[PlannerSpec]] = {}
+    for s in specs():
+        by_name.setdefault(s.name, []).append(s)
+    for versions in by_name.values():
+        for a, b in itertools.permutations(versions, 2):
+            assert a.cls is b.cls or not issubclass(a.cls, b.cls), (
+                f"{a.id} ({a.cls.__qualname__}) subclasses {b.id} ({b.cls.__qualname__})")
+
+
+def test_every_id_is_a_distinct_planner() -> None:
+    """No two ids run the same class with the same default configuration."""
+    seen: dict[tuple[type, str], str] = {}
+    for s in specs():
+        key = (s.cls, s.config_model().model_dump_json())
+        assert key not in seen, f"{s.id} is {seen[key]} again"
+        seen[key] = s.id
+
+
+def test_aep_versions_differ_in_their_fallback_only() -> None:
+    v1, v2 = spec("aep-v1"), spec("aep-v2")
+    assert v1.cls is not v2.cls
+    assert not issubclass(v1.cls, v2.cls) and not issubclass(v2.cls, v1.cls)
+    first, second = v1.config_model().model_dump(), v2.config_model().model_dump()
+    assert first["fallback"] is None and second["fallback"] is not None
+    assert {k: v for k, v in first.items() if k != "fallback"} == {
+        k: v for k, v in second.items() if k != "fallback"}
