@@ -70,6 +70,11 @@ class SandboxedPlanner:
         self.subscription: DirtyBoxSubscription | None = None
         self.surface_subscription: DirtyBoxSubscription | None = None
         self.planning_s = 0.0
+        self._cpu_seconds = 0.0
+        # The CPU seconds of the planner process's reset (its map mirror and the planner's own
+        # reset), which happens inside the first `plan` call, when the grid is known: an
+        # in-process planner's reset is outside its `plan` calls.
+        self.reset_cpu_seconds = 0.0
         # What the planner process reports of each call: map refresh and planner time, ms.
         self.timings: list[dict[str, float]] = []
         self._buffer = b""
@@ -105,6 +110,27 @@ class SandboxedPlanner:
         self.shared = None
         shutil.rmtree(self.tmp, ignore_errors=True)
         shutil.rmtree(self.shm_dir, ignore_errors=True)
+
+    def cpu_seconds(self) -> float:
+        """CPU seconds (user + system) the sandbox has used so far, as the kernel counts them.
+
+        Every thread of every process of the sandbox counts: bubblewrap and the planner process,
+        and anything the planner started, found through the sandbox's cgroup and through the
+        process tree below the started process. Each process's count in `/proc/PID/stat`
+        covers all its threads (the exited ones too) plus its children it has waited for. The
+        episode runner charges a `plan` call the difference of this before and after it; the
+        planner's own report of its time is never used. Never decreases (a process that ended
+        between two readings is not subtracted); 0 before the sandbox starts.
+        """
+        if self.proc is None or self.proc.returncode is not None:
+            return self._cpu_seconds  # not started, or ended and reaped: its pid may be reused
+        pids = _descendants(self.proc.pid)
+        if self.cgroups is not None:
+            for path in self.cgroups.paths:
+                pids.update(_cgroup_pids(path))
+        ticks = sum(_cpu_ticks(pid) for pid in pids)
+        self._cpu_seconds = max(self._cpu_seconds, ticks / _CLOCK_TICKS)
+        return self._cpu_seconds
 
     def stderr_tail(self) -> str:
         try:
@@ -175,9 +201,11 @@ class SandboxedPlanner:
             self.shared[0] = view.state
             self.shared[1] = view.surface_weight
             self.shared[2] = view.surface_directions
+            before = self.cpu_seconds()
             self._call({"op": "reset", "ctx": encode_context(self._ctx),
                         "grid": {"shape": list(view.shape), "origin": view.origin.tolist(),
                                  "voxel_size": view.voxel_size}}, "reset")
+            self.reset_cpu_seconds = self.cpu_seconds() - before
             self._pending_reset = False
             self._sync_thread = threading.Thread(target=self._sync_loop, args=(view,),
                                                  name="sandbox-map-sync", daemon=True)
@@ -305,6 +333,53 @@ class SandboxedPlanner:
                 reason = "was killed (memory or another limit)"
             return f"the planner process {reason} during {what}"
         return f"the planner process exited (code {code}) during {what}"
+
+
+_CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
+
+
+def _cpu_ticks(pid: int) -> int:
+    """utime + stime + cutime + cstime of process `pid` in clock ticks; 0 if it is gone."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as fh:
+            stat = fh.read()
+    except OSError:
+        return 0
+    # The command name (field 2) may hold spaces and parentheses: count from its last ')'.
+    fields = stat[stat.rfind(b")") + 2:].split()
+    try:
+        return sum(int(value) for value in fields[11:15])  # fields 14 to 17
+    except ValueError:
+        return 0
+
+
+def _descendants(pid: int) -> set[int]:
+    """`pid` and the processes below it, from `/proc/PID/task/TID/children`."""
+    found: set[int] = set()
+    todo = [pid]
+    while todo:
+        current = todo.pop()
+        if current in found:
+            continue
+        found.add(current)
+        try:
+            tasks = os.listdir(f"/proc/{current}/task")
+        except OSError:
+            continue
+        for tid in tasks:
+            try:
+                with open(f"/proc/{current}/task/{tid}/children", "rb") as fh:
+                    todo.extend(int(child) for child in fh.read().split())
+            except (OSError, ValueError):
+                continue
+    return found
+
+
+def _cgroup_pids(path: Path) -> set[int]:
+    try:
+        return {int(pid) for pid in (path / "cgroup.procs").read_text().split()}
+    except (OSError, ValueError):
+        return set()
 
 
 def isolation_limit() -> int:
