@@ -1,0 +1,511 @@
+"""The benchmark's version and the fingerprints of its planners, held to a lock file.
+
+A result is comparable with another only if both were made by the same simulator, metrics,
+presets and areas, and by the same planner code. This module names that code:
+
+- `component_hashes()`: one SHA-256 per component of the benchmark,
+
+  - ``sim``: every ``*.py`` file under the `sim` package (the simulator and the metrics),
+    subpackages included;
+  - ``presets``: the canonical JSON of ``sim.config.PRESETS`` (each preset's ``model_dump``);
+  - ``areas``: the sources of ``areas/registry.py`` and ``areas/ground_truth.py`` and of every
+    module under ``areas/`` they import, transitively (the generators of the built-in areas are
+    imported by the registry), plus the canonical JSON of each built-in area's name, generator
+    and parameters (layout seed included).
+
+- `benchmark_version()`: the short human name of those components (``2026.12-1``: year, month,
+  and a counter), read from the lock file. When the tree's components differ from the lock's,
+  the name gets the suffix ``+modified.<8 hex digits of the tree's components>``, and without a
+  lock file the name is ``unlocked+<digits>``: a result is never labelled with a version whose
+  code it was not made with.
+
+- `planner_fingerprint(planner_id)`: a SHA-256 over the planner's class (module and qualified
+  name), the canonical JSON of its default configuration, and the sources of its dependencies:
+  the modules defining the class, its config model and their bases, and every module they
+  import transitively (imports inside functions included) that lies in the `planners` package,
+  in the top-level package of the planner's own module (a third-party planner's), or is
+  ``sim/interface.py``. Other `sim` modules are left to the ``sim`` component, and the
+  catalogue modules ``planners/registry.py`` and ``planners/builtin.py`` are not followed.
+  Imports are read from the sources (`ast`), never executed.
+
+Sources are read as UTF-8 with line endings normalised to ``\\n`` and named by their path
+relative to the folder holding their top-level package (``planners/aep.py``), so hashes are the
+same on every checkout; ``__pycache__`` is never read.
+
+The lock file, ``flybo/benchmark.lock.json``, records the version name, the component hashes and
+the fingerprint of every built-in planner id. ``tests/test_versions.py`` fails when the tree no
+longer matches it:
+
+- a component changed: the benchmark version must be bumped, which
+  ``python -m flybo.versions --write`` does (or ``--write --name NAME``);
+- a planner's fingerprint changed: its id must keep the code its results were made with, so
+  the change is registered as a new version beside it (``planners/builtin.py``); a change that
+  leaves every result bit-identical (a refactor) is accepted with ``--write``;
+- a planner id was removed: ids stay registered (``--write`` refuses unless
+  ``--allow-removal``);
+- a planner id was added: ``--write`` records it.
+
+``python -m flybo.versions`` prints the tree's versions, ``--check`` exits 1 listing every
+mismatch, ``--write`` updates the lock and prints what changed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import dataclasses
+import datetime
+import enum
+import functools
+import hashlib
+import importlib.util
+import json
+import re
+import sys
+from collections.abc import Callable, Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+LOCK_PATH = Path(__file__).with_name("benchmark.lock.json")
+COMPONENTS = ("sim", "presets", "areas")
+WRITE_COMMAND = "python -m flybo.versions --write"
+
+_VERSION_NAME = re.compile(r"^(?P<year>\d{4})\.(?P<month>\d{2})-(?P<serial>\d+)$")
+# Planner dependencies outside these are not followed (see the module's docstring).
+_PLANNER_PACKAGES = ("planners",)
+_PLANNER_EXTRA_MODULES = ("sim.interface",)
+_NOT_FOLLOWED = ("planners.registry", "planners.builtin")
+
+
+# -- sources --------------------------------------------------------------------------------------
+
+
+def read_source(path: Path) -> str:
+    """The text of a source file: UTF-8, line endings normalised to ``\\n``."""
+    text = path.read_bytes().decode("utf-8")
+    return text.replace("\r\n", "\n").replace("\r", "\n")
+
+
+# Module-level so that tests can swap it: every source is read through `_read`.
+_read: Callable[[Path], str] = read_source
+
+
+def _canonical(value: Any) -> str:
+    return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=False,
+                      allow_nan=False)
+
+
+def _sha256(value: Any) -> str:
+    return hashlib.sha256(_canonical(value).encode("utf-8")).hexdigest()
+
+
+@functools.cache
+def _top_level_location(top: str) -> Path | None:
+    """The folder of package `top`, or the file of module `top`; None when it is not found."""
+    try:
+        found = importlib.util.find_spec(top)
+    except (ImportError, ValueError):
+        return None
+    if found is None:
+        return None
+    if found.submodule_search_locations:
+        return Path(next(iter(found.submodule_search_locations))).resolve()
+    return Path(found.origin).resolve() if found.origin else None
+
+
+def _module_file(module: str) -> Path | None:
+    """The source file of `module` (dotted name), without importing it; None when there is none.
+    """
+    top, _, rest = module.partition(".")
+    base = _top_level_location(top)
+    if base is None:
+        return None
+    if base.is_file():
+        return base if not rest and base.suffix == ".py" else None
+    folder = base.joinpath(*rest.split(".")) if rest else base
+    if rest and (candidate := folder.parent / f"{folder.name}.py").is_file():
+        return candidate
+    init = folder / "__init__.py"
+    return init if init.is_file() else None
+
+
+def _relative_name(module: str, path: Path) -> str:
+    """`path` relative to the folder holding `module`'s top-level package, with '/'."""
+    base = _top_level_location(module.partition(".")[0])
+    assert base is not None
+    return path.relative_to(base.parent).as_posix()
+
+
+@functools.lru_cache(maxsize=1024)
+def _imports(module: str, is_package: bool, source: str) -> frozenset[str]:
+    """Every module `source` (of `module`, a package's ``__init__`` if `is_package`) imports,
+    anywhere in the file."""
+    package = module if is_package else module.rpartition(".")[0]
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(source, filename=module)):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                parts = package.split(".") if package else []
+                if node.level - 1 > len(parts):
+                    continue
+                parts = parts[: len(parts) - (node.level - 1)]
+                base = ".".join([*parts, *([node.module] if node.module else [])])
+            else:
+                base = node.module or ""
+            if not base:
+                continue
+            found.add(base)
+            # `from package import name` may import the submodule `package.name`.
+            found.update(f"{base}.{alias.name}" for alias in node.names if alias.name != "*")
+    return frozenset(found)
+
+
+def _closure(roots: Iterable[str], follow: Callable[[str], bool]) -> dict[str, tuple[str, str]]:
+    """{module: (relative path, source)} of `roots` and of every module they import
+    transitively for which `follow` is true and a source file exists."""
+    seen: dict[str, tuple[str, str]] = {}
+    pending = [m for m in roots if follow(m)]
+    while pending:
+        module = pending.pop()
+        if module in seen:
+            continue
+        path = _module_file(module)
+        if path is None or "__pycache__" in path.parts:
+            continue
+        source = _read(path)
+        seen[module] = (_relative_name(module, path), source)
+        imported = _imports(module, path.name == "__init__.py", source)
+        pending.extend(m for m in imported if follow(m) and m not in seen)
+    return seen
+
+
+def _sources(modules: dict[str, tuple[str, str]]) -> list[list[str]]:
+    return [[rel, text] for rel, text in sorted(modules.values())]
+
+
+def _package_sources(package: str) -> list[list[str]]:
+    """[relative path, source] of every ``*.py`` file under `package`, sorted by path."""
+    base = _top_level_location(package)
+    if base is None or not base.is_dir():
+        raise RuntimeError(f"package {package!r} not found")
+    files = [p for p in base.rglob("*.py") if "__pycache__" not in p.relative_to(base).parts]
+    return sorted([p.relative_to(base.parent).as_posix(), _read(p)] for p in files)
+
+
+# -- components -----------------------------------------------------------------------------------
+
+
+def _to_json(value: Any) -> Any:
+    """A JSON-able description of a parameter value (dataclasses, tuples, enums, numpy)."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {"__type__": f"{type(value).__module__}.{type(value).__qualname__}",
+                **{f.name: _to_json(getattr(value, f.name)) for f in dataclasses.fields(value)}}
+    if isinstance(value, enum.Enum):
+        return _to_json(value.value)
+    if isinstance(value, dict):
+        return {str(k): _to_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_to_json(v) for v in value]
+    if hasattr(value, "tolist"):  # numpy arrays and scalars
+        return _to_json(value.tolist())
+    if isinstance(value, float) and value != value:
+        return "nan"
+    if isinstance(value, float) and value in (float("inf"), float("-inf")):
+        return str(value)
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    if callable(value):
+        return _describe_callable(value)
+    raise TypeError(f"cannot describe {type(value).__name__} {value!r} for a version hash")
+
+
+def _describe_callable(fn: Any) -> Any:
+    if isinstance(fn, functools.partial):
+        return {"function": _describe_callable(fn.func), "args": _to_json(list(fn.args)),
+                "kwargs": _to_json(dict(fn.keywords))}
+    return f"{fn.__module__}.{fn.__qualname__}"
+
+
+def _sim_hash() -> str:
+    return _sha256(_package_sources("sim"))
+
+
+def _presets_hash() -> str:
+    from sim.config import PRESETS
+
+    return _sha256({name: cfg.model_dump(mode="json") for name, cfg in PRESETS.items()})
+
+
+def _areas_hash() -> str:
+    import areas.registry as area_registry
+
+    modules = _closure(["areas.registry", "areas.ground_truth"],
+                       lambda m: m == "areas" or m.startswith("areas."))
+    generators = getattr(area_registry, "_GENERATORS", {})
+    builders = getattr(area_registry, "_builders", {})
+    scenes = {name: {"generator": _describe_callable(generators[name]),
+                     "builder": _describe_callable(builders[name]) if name in builders else None}
+              for name in sorted(generators)}
+    return _sha256({"sources": _sources(modules), "areas": scenes})
+
+
+_COMPONENT_HASHES: dict[str, Callable[[], str]] = {
+    "sim": _sim_hash, "presets": _presets_hash, "areas": _areas_hash,
+}
+
+
+def component_hashes() -> dict[str, str]:
+    """SHA-256 of each component of the benchmark in this tree: ``sim``, ``presets``, ``areas``.
+    """
+    return {name: _COMPONENT_HASHES[name]() for name in COMPONENTS}
+
+
+# -- planners -------------------------------------------------------------------------------------
+
+
+def _planner_modules(cls: type) -> dict[str, tuple[str, str]]:
+    own_top = cls.__module__.partition(".")[0]
+    packages = {*_PLANNER_PACKAGES, own_top}
+
+    def follow(module: str) -> bool:
+        if module in _NOT_FOLLOWED:
+            return False
+        if module in _PLANNER_EXTRA_MODULES:
+            return True
+        return module.partition(".")[0] in packages
+
+    config_model = getattr(cls, "config_model", None)
+    classes = [*cls.__mro__, *(config_model.__mro__ if isinstance(config_model, type) else ())]
+    roots = dict.fromkeys(c.__module__ for c in classes)
+    return _closure(roots, follow)
+
+
+def fingerprint_of_class(cls: type) -> str:
+    """The fingerprint of planner class `cls` with its default configuration."""
+    config = cls.config_model().model_dump(mode="json")  # type: ignore[attr-defined]
+    return _sha256({
+        "class": f"{cls.__module__}.{cls.__qualname__}",
+        "config": config,
+        "sources": _sources(_planner_modules(cls)),
+    })
+
+
+def planner_fingerprint(planner_id: str) -> str:
+    """The fingerprint of registered planner `planner_id` (``name`` means its latest version).
+    """
+    from planners.registry import spec
+
+    return fingerprint_of_class(spec(planner_id).cls)
+
+
+def planner_fingerprints(*, builtin_only: bool = True) -> dict[str, str]:
+    """{id: fingerprint} of every registered planner, or of the built-in ones (the lock's)."""
+    from planners.registry import specs
+
+    return {s.id: fingerprint_of_class(s.cls) for s in specs() if s.builtin or not builtin_only}
+
+
+# -- the lock -------------------------------------------------------------------------------------
+
+
+def load_lock(path: Path | None = None) -> dict[str, Any] | None:
+    """The contents of the lock file (`LOCK_PATH` unless `path`), or None when there is none."""
+    try:
+        return dict(json.loads(read_source(path or LOCK_PATH)))
+    except FileNotFoundError:
+        return None
+
+
+def current_lock(benchmark_version: str) -> dict[str, Any]:
+    """What the lock file would hold for this tree under version name `benchmark_version`."""
+    return {"benchmark_version": benchmark_version, "components": component_hashes(),
+            "planners": planner_fingerprints()}
+
+
+def _components_digest(components: dict[str, str]) -> str:
+    return _sha256(components)[:8]
+
+
+def benchmark_version() -> str:
+    """The benchmark version of this tree: the lock's name, marked when the tree differs."""
+    return _version_of(load_lock(), component_hashes())
+
+
+def _version_of(lock: dict[str, Any] | None, components: dict[str, str]) -> str:
+    if lock is None:
+        return f"unlocked+{_components_digest(components)}"
+    name = str(lock.get("benchmark_version", "unnamed"))
+    if lock.get("components") != components:
+        return f"{name}+modified.{_components_digest(components)}"
+    return name
+
+
+def next_version(name: str, today: datetime.date | None = None) -> str:
+    """The version name after `name`: this month's first, or the next of the same month."""
+    today = today or datetime.datetime.now(datetime.UTC).date()
+    month = f"{today.year:04d}.{today.month:02d}"
+    match = _VERSION_NAME.match(name)
+    if match is None:
+        return f"{month}-1"
+    if (int(match["year"]), int(match["month"])) >= (today.year, today.month):
+        return f"{match['year']}.{match['month']}-{int(match['serial']) + 1}"
+    return f"{month}-1"
+
+
+def _next_planner_id(planner_id: str, known: Iterable[str]) -> str:
+    from planners.registry import format_id, parse_id
+
+    name, _ = parse_id(planner_id)
+    versions = [v for i in known for n, v in [parse_id(i)] if n == name and v is not None]
+    return format_id(name, max(versions, default=0) + 1)
+
+
+def check_lock(lock: dict[str, Any], components: dict[str, str],
+               planners: dict[str, str]) -> list[str]:
+    """Every way in which the tree (`components`, `planners`) differs from `lock`, each with
+    what to do about it; empty when they match."""
+    problems: list[str] = []
+    name = str(lock.get("benchmark_version", ""))
+    if not _VERSION_NAME.match(name):
+        problems.append(f"the lock's benchmark version {name!r} is not of the form YYYY.MM-N: "
+                        f"set one with `{WRITE_COMMAND} --name {next_version(name)}`")
+    locked_components = dict(lock.get("components", {}))
+    changed = [c for c in sorted(set(components) | set(locked_components))
+               if locked_components.get(c) != components.get(c)]
+    for component in changed:
+        problems.append(
+            f"component {component!r} changed since benchmark version {name}, which was not "
+            f"bumped (lock {str(locked_components.get(component))[:12]}, tree "
+            f"{str(components.get(component))[:12]}): bump it to {next_version(name)} with "
+            f"`{WRITE_COMMAND}` (or choose the name: `{WRITE_COMMAND} --name NAME`)")
+    locked_planners = dict(lock.get("planners", {}))
+    known = set(locked_planners) | set(planners)
+    for planner_id in sorted(known):
+        old, new = locked_planners.get(planner_id), planners.get(planner_id)
+        if new is None:
+            problems.append(
+                f"planner {planner_id} was removed: a released id stays registered, since "
+                f"results name it; register it again (planners/builtin.py)")
+        elif old is None:
+            problems.append(f"planner {planner_id} is new: record it with `{WRITE_COMMAND}`")
+        elif old != new:
+            problems.append(
+                f"planner {planner_id} changed: register it as "
+                f"{_next_planner_id(planner_id, known)} and keep {planner_id} as it was "
+                f"(planners/builtin.py); only if every result of {planner_id} stays "
+                f"bit-identical (a refactor), accept the new code with `{WRITE_COMMAND}`")
+    return problems
+
+
+def _write(path: Path, content: dict[str, Any]) -> None:
+    text = json.dumps(content, indent=2, sort_keys=True, ensure_ascii=False) + "\n"
+    path.write_text(text, encoding="utf-8", newline="\n")
+
+
+def write_lock(path: Path | None = None, *, name: str | None = None,
+               allow_removal: bool = False, today: datetime.date | None = None) -> list[str]:
+    """Bring the lock file (`LOCK_PATH` unless `path`) up to date with the tree; the lines say
+    what changed.
+
+    The version name is bumped (`next_version`) when a component changed, unless `name` is
+    given.
+
+    Raises:
+        ValueError: a planner id would be removed without `allow_removal`, or `name` is the
+            lock's name although a component changed, or is not of the form YYYY.MM-N.
+    """
+    path = path or LOCK_PATH
+    old = load_lock(path) or {}
+    old_name = str(old.get("benchmark_version", ""))
+    components, planners = component_hashes(), planner_fingerprints()
+    old_components = dict(old.get("components", {}))
+    old_planners = dict(old.get("planners", {}))
+    changed = [c for c in COMPONENTS if old_components.get(c) != components[c]]
+    removed = sorted(set(old_planners) - set(planners))
+    if removed and not allow_removal:
+        raise ValueError(f"planner ids {', '.join(removed)} are locked but no longer registered; "
+                         "register them again, or pass --allow-removal if they were never "
+                         "released")
+    if name is not None:
+        if not _VERSION_NAME.match(name):
+            raise ValueError(f"benchmark version {name!r} is not of the form YYYY.MM-N")
+        if changed and name == old_name:
+            raise ValueError(f"{', '.join(changed)} changed: the benchmark version must change "
+                             f"from {old_name}")
+        new_name = name
+    elif changed or not _VERSION_NAME.match(old_name):
+        new_name = next_version(old_name, today)
+    else:
+        new_name = old_name
+    lines = []
+    for component in changed:
+        what = "new" if component not in old_components else "changed"
+        lines.append(f"component {component}: {what} ({str(old_components.get(component))[:12]}"
+                     f" -> {components[component][:12]})")
+    for planner_id in sorted(set(old_planners) | set(planners)):
+        before, after = old_planners.get(planner_id), planners.get(planner_id)
+        if before == after:
+            continue
+        if after is None:
+            lines.append(f"planner {planner_id}: removed")
+        elif before is None:
+            lines.append(f"planner {planner_id}: added")
+        else:
+            lines.append(f"planner {planner_id}: CHANGED - accepted as a refactor; if its results "
+                         f"differ, register the change as a new version instead")
+    if new_name != old_name:
+        lines.append(f"benchmark version: {old_name or '(none)'} -> {new_name}")
+    content = {"benchmark_version": new_name, "components": components, "planners": planners}
+    if content != old:
+        _write(path, content)
+    return lines
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m flybo.versions",
+        description="The benchmark version and planner fingerprints of this tree, and the lock "
+        "file that records them.")
+    action = parser.add_mutually_exclusive_group()
+    action.add_argument("--write", action="store_true", help="update the lock file")
+    action.add_argument("--check", action="store_true",
+                        help="exit 1 when the tree differs from the lock file")
+    parser.add_argument("--name", help="with --write: the new benchmark version name")
+    parser.add_argument("--allow-removal", action="store_true",
+                        help="with --write: drop locked planner ids that are no longer registered")
+    parser.add_argument("--lock", type=Path, default=None, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    lock_path: Path = args.lock or LOCK_PATH
+    if (args.name or args.allow_removal) and not args.write:
+        parser.error("--name and --allow-removal go with --write")
+    if args.write:
+        try:
+            lines = write_lock(lock_path, name=args.name, allow_removal=args.allow_removal)
+        except ValueError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 1
+        print("\n".join(lines) if lines else f"{lock_path.name} is up to date")
+        return 0
+    lock = load_lock(lock_path)
+    if args.check:
+        if lock is None:
+            print(f"no lock file at {lock_path}: create it with `{WRITE_COMMAND}`",
+                  file=sys.stderr)
+            return 1
+        problems = check_lock(lock, component_hashes(), planner_fingerprints())
+        for problem in problems:
+            print(problem, file=sys.stderr)
+        return 1 if problems else 0
+    components = component_hashes()
+    print(f"benchmark version {_version_of(lock, components)}")
+    for component, digest in components.items():
+        print(f"  {component:<8} {digest}")
+    for planner_id, digest in planner_fingerprints(builtin_only=False).items():
+        print(f"  {planner_id:<16} {digest}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
