@@ -55,6 +55,9 @@ class EpisodeResult:
         default_factory=lambda: np.zeros((0, 3), dtype=np.int32)
     )
     safety_stops: int = 0
+    # Every number the registered measures report (`sim.measures.metric_infos`), None where
+    # undefined.
+    metrics: dict[str, float | None] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         return {

@@ -1,0 +1,52 @@
+"""What an episode keeps for replay: poses, map keyframes, plans and surface snapshots, each on
+its own schedule (`docs/recording.md`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from areas.area import Area
+from sim.config import EpisodeConfig
+from sim.recording import RecordingWriter
+from sim.sensing import Sensing
+
+
+class EpisodeRecorder:
+    """Writes the run's recording as it goes; `save` puts it on disk."""
+
+    def __init__(self, area: Area, config: EpisodeConfig, planner_name: str, seed: int,
+                 preset_name: str) -> None:
+        self.cfg = config
+        self.writer = RecordingWriter(header={
+            "area": area.name, "planner": planner_name, "seed": seed, "preset": preset_name,
+            "voxel_size": area.voxel_size, "grid_origin": area.bounds_min.tolist(),
+            "grid_shape": list(area.grid_shape), "camera": config.camera.model_dump(),
+            "pose_rate_hz": config.pose_record_hz,
+        })
+        self.next_pose = 0.0
+        self.next_keyframe = 0.0
+        self.next_surface = config.surface_snapshot_interval_s
+
+    def pose(self, now: float, position: np.ndarray, yaw: float) -> None:
+        """After a physics step: the true pose, at the recording's pose rate."""
+        if now >= self.next_pose - 1e-9:
+            self.writer.pose(now, position, yaw)
+            self.next_pose += 1.0 / self.cfg.pose_record_hz
+
+    def frame(self, stamp: float, sensing: Sensing) -> None:
+        """After a camera frame: map keyframes and surface snapshots when they are due."""
+        if stamp >= self.next_keyframe - 1e-9:
+            self.writer.map_keyframe(stamp, sensing.mapping.occupancy.state)
+            self.next_keyframe += self.cfg.keyframe_interval_s
+        if stamp >= self.next_surface - 1e-9:
+            self.writer.surface(stamp, sensing.tsdf.surface_points(),
+                                self.cfg.surface_snapshot_voxel_m)
+            self.next_surface += self.cfg.surface_snapshot_interval_s
+
+    def plan(self, now: float, waypoints: np.ndarray) -> None:
+        self.writer.plan(now, waypoints)
+
+    def save(self, path: Path) -> None:
+        self.writer.save(path)
