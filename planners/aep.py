@@ -21,16 +21,13 @@ import math
 from typing import ClassVar, Literal
 
 import numpy as np
-import numpy.typing as npt
 from pydantic import Field
 
-from planners.api import Observation, Plan, PlannerContext
+from planners.api import FloatArray, Observation, Plan, PlannerContext
 from planners.classic import Classic, ClassicConfig, frontier_fallback
 from planners.nbv_tree import TreeOutcome
 from planners.nbvp import Nbvp, NbvpConfig
 from planners.spatial import SpatialIndex
-
-FloatArray = npt.NDArray[np.float64]
 
 
 class AepBaseConfig(NbvpConfig):

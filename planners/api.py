@@ -10,11 +10,30 @@ from __future__ import annotations
 import abc
 from typing import ClassVar
 
+import numpy as np
+import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict
 
+from sim.geometry import FloatArray
 from sim.interface import Observation, Plan, PlannerContext, PlanOutcome
 
-__all__ = ["Observation", "Plan", "PlanOutcome", "Planner", "PlannerConfig", "PlannerContext"]
+__all__ = [
+    "BoolGrid",
+    "FloatArray",
+    "IntArray",
+    "Observation",
+    "Plan",
+    "PlanOutcome",
+    "Planner",
+    "PlannerConfig",
+    "PlannerContext",
+]
+
+# The array types of the planners' signatures, for planners to import from here. `FloatArray`
+# is the simulator's (`sim.geometry`); the other two belong beside it in `sim` as well, and are
+# defined here until they are.
+BoolGrid = npt.NDArray[np.bool_]
+IntArray = npt.NDArray[np.int64]
 
 
 class PlannerConfig(BaseModel):
