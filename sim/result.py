@@ -84,6 +84,7 @@ class EpisodeResult:
             "planning_time_ms": timing_summary(self.planning_times_ms),
             "surface": _finite(self.surface.as_dict()),
             "frame_costs_ms": self.frame_costs_ms,
+            "metrics": dict(self.metrics),
             "series": {
                 "time_s": self.volume_times.tolist(),
                 "explored_volume_m3": self.volume_m3.tolist(),

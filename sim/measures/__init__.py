@@ -16,9 +16,10 @@ from sim.measures.registry import (
     register_measure,
 )
 from sim.measures.series import ExploredVolume, RecallSeries, Series
+from sim.measures.time_to_coverage import TimeToCoverage
 
 for _cls in (ExploredVolume, RecallSeries, Coverage, Reconstruction, SurfaceQuality, PathLength,
-             Collisions, SafetyStops, Planning):
+             Collisions, SafetyStops, Planning, TimeToCoverage):
     register_measure(_cls)
 
 __all__ = [

@@ -254,3 +254,14 @@ def test_without_a_new_obstacle_the_flight_is_not_stopped(
     assert outcome == "reached"
     assert planner.goal is not None
     assert np.linalg.norm(reached - planner.goal) < 0.1
+
+
+def test_result_reports_every_registered_metric(short_run: EpisodeResult) -> None:
+    from sim.measures import metric_infos
+
+    keys = [m.key for m in metric_infos()]
+    assert list(short_run.metrics) == keys
+    payload = short_run.to_json()
+    assert payload["metrics"]["coverage"] == short_run.coverage
+    assert payload["metrics"]["fscore"] == short_run.surface.fscore
+    assert payload["metrics"]["iterations"] == short_run.iterations
