@@ -1,4 +1,8 @@
-"""The `flybo` command line: thin subcommands over the library."""
+"""The `flybo` command line: thin subcommands over the library.
+
+The simulation stack (areas, planners, sim: Open3D, numba) is imported by the commands that
+use it, so that the service and client commands (`flybo.service_cli`) start without it.
+"""
 
 from __future__ import annotations
 
@@ -8,21 +12,26 @@ import math
 import shutil
 import sys
 import tempfile
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from pydantic import ValidationError
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from flybo.errors import CliError
+from flybo.service_cli import add_service_commands, check_planner, run_service_command
+
+__all__ = ["CliError", "main"]
 
 if TYPE_CHECKING:
     from areas import Area, GroundTruth
     from planners.api import Planner
     from sim.config import EpisodeConfig
     from sim.result import EpisodeResult
-
-
-class CliError(Exception):
-    """A problem with the command line's input, reported in one line."""
 
 
 def _positive(text: str) -> float:
@@ -88,8 +97,6 @@ def _parser() -> argparse.ArgumentParser:
                                     "run on a planner file (.py or .zip) locally")
     check.add_argument("file", type=Path)
     sub.add_parser("presets", help="list the episode presets")
-    from flybo.service_cli import add_service_commands
-
     add_service_commands(sub)
     return parser
 
@@ -108,16 +115,12 @@ def main(argv: list[str] | None = None) -> None:
         elif args.command == "areas":
             _list_areas()
         elif args.command == "planners" and args.planners_command == "check":
-            from flybo.service_cli import check_planner
-
             check_planner(args.file)
         elif args.command == "planners":
             _list_planners()
         elif args.command == "presets":
             _list_presets()
         else:
-            from flybo.service_cli import run_service_command
-
             run_service_command(args)
     except CliError as exc:
         print(f"flybo: error: {exc}", file=sys.stderr)
@@ -128,7 +131,7 @@ def main(argv: list[str] | None = None) -> None:
 
 
 def _list_areas() -> None:
-    from areas import area_names, load_area
+    from areas import area_names, load_area  # the simulation stack: on use
     from areas.registry import all_area_names
 
     built_in = set(area_names())
@@ -140,7 +143,7 @@ def _list_areas() -> None:
 
 
 def _import_area(args: argparse.Namespace) -> None:
-    from areas import load_ground_truth
+    from areas import load_ground_truth  # the simulation stack: on use
     from areas.importer import MeshImportError, import_mesh
     from areas.registry import store_area
     from areas.store import AreaStoreError
@@ -159,7 +162,7 @@ def _import_area(args: argparse.Namespace) -> None:
 
 
 def _load_named_area(name: str) -> Area:
-    from areas import UnknownAreaError, load_area
+    from areas import UnknownAreaError, load_area  # the simulation stack: on use
     from areas.store import AreaStoreError
 
     try:
@@ -169,7 +172,7 @@ def _load_named_area(name: str) -> Area:
 
 
 def _show_area(name: str) -> None:
-    from areas import load_ground_truth
+    from areas import load_ground_truth  # the simulation stack: on use
     from areas.stats import TABLE1, measure
 
     area = _load_named_area(name)
@@ -204,9 +207,7 @@ def _show_area(name: str) -> None:
 
 
 def _build_areas(name: str) -> None:
-    import time
-
-    from areas import area_names
+    from areas import area_names  # the simulation stack: on use
     from areas.ground_truth import ensure_cached
     from areas.thumbnail import write_thumbnails
 
@@ -232,21 +233,21 @@ def _build_areas(name: str) -> None:
 
 
 def _list_planners() -> None:
-    from planners.registry import planner_ids, spec
+    from planners.registry import planner_ids, spec  # the simulation stack: on use
 
     for planner_id in planner_ids():
         print(f"{planner_id:<16} {spec(planner_id).description}")
 
 
 def _list_presets() -> None:
-    from sim.config import PRESETS
+    from sim.config import PRESETS  # the simulation stack: on use
 
     for name in sorted(PRESETS):
         print(name)
 
 
 def _run(args: argparse.Namespace) -> None:
-    from areas import UnknownAreaError, load_area, load_ground_truth
+    from areas import UnknownAreaError, load_area, load_ground_truth  # the simulation stack: on use
     from planners.registry import PlannerConfigError, UnknownPlannerError, make, spec
     from sim.config import UnknownPresetError, preset
 
@@ -292,9 +293,7 @@ def _run_with_progress(
     config: EpisodeConfig,
     staging: Path,
 ) -> EpisodeResult:
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
-    from sim.episode import run_episode
+    from sim.episode import run_episode  # the simulation stack: on use
 
     seconds = args.seconds if args.seconds is not None else area.plateau_s
     recording = staging / "recording.npz"
@@ -318,7 +317,7 @@ def _run_with_progress(
 
 
 def _write_ply(path: Path, vertices: np.ndarray, triangles: np.ndarray) -> None:
-    from sim.open3d_any import o3d
+    from sim.open3d_any import o3d  # the simulation stack: on use
 
     mesh = o3d.geometry.TriangleMesh(
         o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles)
@@ -328,9 +327,6 @@ def _write_ply(path: Path, vertices: np.ndarray, triangles: np.ndarray) -> None:
 
 
 def _print_summary(payload: dict[str, Any], out: Path) -> None:
-    from rich.console import Console
-    from rich.table import Table
-
     surface = payload["surface"]
     timing = payload["planning_time_ms"]
 

@@ -1,27 +1,45 @@
 """`flybo serve`, `worker`, `tokens` and the HTTP client commands `submit`, `jobs`, `results`,
-`benchmark` (a whole suite as one job group) and `report` (the paper's tables and figures)."""
+`benchmark` (a whole suite as one job group) and `report` (the paper's tables and figures).
+
+Each command imports the stack it needs when it runs: the HTTP client commands never load the
+service (FastAPI, SQLAlchemy, Celery), and no command loads the simulation (Open3D, numba)
+unless it flies or checks a planner.
+"""
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import ctypes
 import os
 import signal
 import subprocess
 import sys
 import time
+import uuid
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+import httpx
+from pydantic import ValidationError
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TextColumn,
+    TimeElapsedColumn,
+)
+
+from flybo.errors import CliError
+
+if TYPE_CHECKING:
+    from sqlalchemy.orm import Session, sessionmaker
+
+    from server.settings import Settings
 
 COMMANDS = ("serve", "worker", "viewer", "tokens", "submit", "submit-planner", "jobs",
             "results", "benchmark", "report")
 DEFAULT_SERVER = "http://127.0.0.1:8000"
-
-
-def _error(message: str) -> Exception:
-    from flybo.cli import CliError
-
-    return CliError(message)
 
 
 def add_service_commands(sub: Any) -> None:
@@ -122,62 +140,61 @@ def run_service_command(args: argparse.Namespace) -> None:
 
 def check_planner(path: Path) -> None:
     """`flybo planners check FILE`: the upload's checks and dry run, on this machine."""
+    # The sandbox and, for the dry run, the simulation: loaded by this command only.
+    from server.planner_package import PackageError, load_package
     from worker.sandbox.dry_run import dry_run
     from worker.sandbox.isolation import probe
-    from worker.sandbox.package import PackageError, load_package
 
     try:
         data = path.read_bytes()
     except OSError as exc:
-        raise _error(f"cannot read {path}: {exc.strerror or exc}") from None
+        raise CliError(f"cannot read {path}: {exc.strerror or exc}") from None
     try:
         package = load_package(path.name, data)
     except PackageError as exc:
-        raise _error(f"{path}: {exc}") from None
+        raise CliError(f"{path}: {exc}") from None
     for note in probe().notes:
         print(f"note: {note}")
     outcome = dry_run(package)
     print(outcome.output)
     if not outcome.passed:
-        raise _error(f"{path} failed its dry run")
+        raise CliError(f"{path} failed its dry run")
     print(f"{path}: passed ({len(package.files)} files, code hash {package.code_hash[:12]}, "
           f"{outcome.wall_s:.1f} s)")
 
 
 # -- local commands ---------------------------------------------------------------------------
 
-def _settings() -> Any:
-    from pydantic import ValidationError
-
-    from server.settings import load_settings
+def _settings() -> Settings:
+    from server.settings import load_settings  # the service's code: only for its commands
 
     try:
         return load_settings()
     except ValidationError as exc:
         problems = "; ".join(str(e["msg"]) for e in exc.errors())
-        raise _error(f"invalid FLYBO_* settings: {problems}") from None
+        raise CliError(f"invalid FLYBO_* settings: {problems}") from None
 
 
-def _migrated(settings: Any) -> Any:
-    from server.db import make_engine, make_session_factory
+def _migrated(settings: Settings) -> sessionmaker[Session]:
+    from server.db import make_engine, make_session_factory  # SQLAlchemy, Alembic: on use
     from server.migrate import upgrade
 
     engine = make_engine(settings.db_url)
     try:
         upgrade(engine)
     except Exception as exc:
-        raise _error(f"cannot reach or migrate the database {engine.url!r}: {exc}") from None
+        raise CliError(f"cannot reach or migrate the database {engine.url!r}: {exc}") from None
     return make_session_factory(engine)
 
 
 def _tokens(args: argparse.Namespace) -> None:
-    from server.db import session_scope
+    from server.db import session_scope  # SQLAlchemy: on use
     from server.security import create_token
 
     settings = _settings()
     name = args.user.strip()
     if not name or len(name) > 64:
-        raise _error("--user must be 1 to 64 characters")
+        raise CliError("--user must be 1 to 64 characters")
     with session_scope(_migrated(settings)) as session:
         token = create_token(session, name, settings.secret_key, admin=args.admin)
     print(token)
@@ -185,9 +202,9 @@ def _tokens(args: argparse.Namespace) -> None:
 
 def _worker(args: argparse.Namespace) -> None:
     if args.concurrency < 1:
-        raise _error("--concurrency must be at least 1")
+        raise CliError("--concurrency must be at least 1")
     _migrated(_settings())
-    from server.queue import QUEUE
+    from server.queue import QUEUE  # Celery; importing the worker's app configures it
     from worker.celery_app import app
 
     app.worker_main(["worker", f"--concurrency={args.concurrency}", "--pool=prefork",
@@ -196,30 +213,31 @@ def _worker(args: argparse.Namespace) -> None:
 
 
 def _viewer(args: argparse.Namespace) -> None:
-    from web.replay.app import serve_viewer
+    from web.replay.app import serve_viewer  # viser and the simulation: on use
 
     settings = _settings()
     if args.compare is not None and args.recording is None:
-        raise _error("--compare needs --recording")
+        raise CliError("--compare needs --recording")
     for path in (args.recording, args.compare):
         if path is not None and not path.is_file():
-            raise _error(f"no recording file {path}")
+            raise CliError(f"no recording file {path}")
     if args.recording is None:
         _migrated(settings)
     try:
         serve_viewer(settings, args.host, args.port or settings.viewer_port,
                      recording=args.recording, compare=args.compare)
     except OSError as exc:
-        raise _error(f"cannot start the viewer: {exc}") from None
+        raise CliError(f"cannot start the viewer: {exc}") from None
 
 
 def _serve(args: argparse.Namespace) -> None:
-    import uvicorn
+    import uvicorn  # the whole service (API, pages, sandbox): only when serving
 
-    from server.app import MAX_CONCURRENT_REQUESTS, create_app
+    from flybo.app import create_app
+    from server.app import MAX_CONCURRENT_REQUESTS
 
     if not 0 < args.port < 65536:
-        raise _error(f"--port must be 1-65535, got {args.port}")
+        raise CliError(f"--port must be 1-65535, got {args.port}")
     settings = _settings()
     factory = _migrated(settings)
     # Each worker leads its own process group (Celery's pool processes included), so that
@@ -230,7 +248,7 @@ def _serve(args: argparse.Namespace) -> None:
     url = f"http://{args.host}:{args.port}"
     viewer = None
     if not args.no_viewer:
-        from web.replay.app import start_viewer
+        from web.replay.app import start_viewer  # viser: only when the viewer is wanted
 
         try:
             viewer = start_viewer(settings, args.host, settings.viewer_port)
@@ -269,15 +287,13 @@ def _serve(args: argparse.Namespace) -> None:
 
 def _stop_with_parent() -> None:
     """In a worker before it starts: SIGTERM when the service process dies (Linux)."""
-    import ctypes
-
     pr_set_pdeathsig = 1
     with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, signal.SIGTERM)
 
 
-def _demo(factory: Any, settings: Any, url: str) -> None:
-    from sqlalchemy import select
+def _demo(factory: sessionmaker[Session], settings: Settings, url: str) -> None:
+    from sqlalchemy import select  # the service stack: on use
 
     from server.catalog import sync_builtin_planners
     from server.db import session_scope
@@ -304,12 +320,10 @@ def _request(args: argparse.Namespace, method: str, path: str, *, auth: bool = F
              headers: dict[str, str] | None = None, retries: int = 0, **kwargs: Any) -> Any:
     """`retries`: attempts after a transport error (only for requests safe to repeat, such as
     a POST with an Idempotency-Key)."""
-    import httpx
-
     headers = dict(headers or {})
     if auth:
         if not args.token:
-            raise _error("an API token is needed: pass --token or set FLYBO_TOKEN "
+            raise CliError("an API token is needed: pass --token or set FLYBO_TOKEN "
                          "(`flybo tokens create --user NAME` on the server prints one)")
         headers["Authorization"] = f"Bearer {args.token}"
     for attempt in range(retries + 1):
@@ -319,16 +333,16 @@ def _request(args: argparse.Namespace, method: str, path: str, *, auth: bool = F
             break
         except httpx.TransportError as exc:
             if attempt == retries:
-                raise _error(f"cannot reach {args.server}: {exc}") from None
+                raise CliError(f"cannot reach {args.server}: {exc}") from None
             time.sleep(2.0)
         except httpx.HTTPError as exc:
-            raise _error(f"cannot reach {args.server}: {exc}") from None
+            raise CliError(f"cannot reach {args.server}: {exc}") from None
     if response.status_code >= 400:
         try:
             detail = response.json().get("detail", response.text)
         except ValueError:
             detail = response.text
-        raise _error(f"{method} {path} answered {response.status_code}: {detail}")
+        raise CliError(f"{method} {path} answered {response.status_code}: {detail}")
     return response.json()
 
 
@@ -336,7 +350,7 @@ def _submit_planner(args: argparse.Namespace) -> None:
     try:
         data = args.file.read_bytes()
     except OSError as exc:
-        raise _error(f"cannot read {args.file}: {exc.strerror or exc}") from None
+        raise CliError(f"cannot read {args.file}: {exc.strerror or exc}") from None
     planner = _request(args, "POST", "/planners", auth=True,
                        files={"file": (args.file.name, data)},
                        data={"name": args.name, "description": args.description})
@@ -376,8 +390,6 @@ def _print_job(job: dict[str, Any]) -> None:
 
 
 def _wait(args: argparse.Namespace, job_id: int) -> None:
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
     final = {"succeeded", "failed", "cancelled"}
     with Progress(TextColumn(f"job {job_id}"), BarColumn(), TextColumn("{task.percentage:>5.1f}%"),
                   TextColumn("{task.description}"), TimeElapsedColumn()) as bar:
@@ -413,13 +425,11 @@ def _names(values: list[str]) -> list[str]:
 
 
 def _benchmark(args: argparse.Namespace) -> None:
-    import uuid
-
     if args.follow is not None:
         _wait_group(args, args.follow)
         return
     if args.runs < 1:
-        raise _error("--runs must be at least 1")
+        raise CliError("--runs must be at least 1")
     body: dict[str, Any] = {"planners": _names(args.planners), "areas": _names(args.areas),
                             "runs": args.runs, "preset": args.preset}
     for key in ("name", "seconds", "time_scale"):
@@ -437,14 +447,6 @@ def _benchmark(args: argparse.Namespace) -> None:
 
 
 def _wait_group(args: argparse.Namespace, group_id: int) -> None:
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-    )
-
     final = {"succeeded", "failed", "cancelled"}
     try:
         with Progress(TextColumn("{task.description:<20}"), BarColumn(), MofNCompleteColumn(),
@@ -491,15 +493,13 @@ def _print_group(group: dict[str, Any]) -> None:
 
 
 def _report(args: argparse.Namespace) -> None:
-    import httpx
-
-    from flybo.report import ReportError, fetch_report_data, write_report
+    from flybo.report import ReportError, fetch_report_data, write_report  # the server's schemas
 
     try:
         with httpx.Client(base_url=args.server.rstrip("/"), timeout=60.0) as client:
             data = fetch_report_data(client, args.preset)
     except ReportError as exc:
-        raise _error(str(exc)) from None
+        raise CliError(str(exc)) from None
     written = write_report(data, args.out)
     print(f"report of preset {args.preset} ({len(data.board.overall)} planner(s), "
           f"{len(data.board.areas)} area(s) with results) in {args.out}/:")

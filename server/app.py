@@ -1,13 +1,15 @@
-"""The FastAPI application: `/api/v1` routes, `/healthz`, OpenAPI docs at `/docs`.
+"""The FastAPI application of the API: `/api/v1` routes, `/healthz`, OpenAPI docs at `/docs`.
 
 At start-up it applies the Alembic migrations, registers the built-in planners and areas, and
-starts the periodic sweep (`server.sweeper`).
+starts the periodic sweep (`server.sweeper`). The service as `flybo serve` runs it, with the web
+pages and the sandboxed dry run of uploaded planners, is composed in `flybo.app`.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import gc
 import logging
 import threading
 from collections.abc import AsyncIterator
@@ -23,6 +25,7 @@ from server.catalog import sync_builtin_areas, sync_builtin_planners
 from server.db import make_engine, make_session_factory, read_only, session_scope
 from server.middleware import install_middleware
 from server.migrate import upgrade
+from server.planner_package import PlannerCheck
 from server.routes import areas, curves, groups, health, jobs, leaderboard, planners, runs
 from server.settings import Settings, load_settings
 from server.sweeper import sweep
@@ -34,8 +37,11 @@ MAX_CONCURRENT_REQUESTS = 300  # `flybo serve` passes it to uvicorn; beyond it, 
 
 
 def create_app(settings: Settings | None = None, *, sweeper: bool = True,
-               sync_areas: bool = True) -> FastAPI:
-    """The app; `sweeper` and `sync_areas` turn off the background work (for tests)."""
+               sync_areas: bool = True, planner_check: PlannerCheck | None = None) -> FastAPI:
+    """The API; `sweeper` and `sync_areas` turn off the background work (for tests).
+
+    `planner_check` dry-runs an uploaded planner that passed the static checks; without one,
+    planner uploads are refused (503)."""
     settings = settings or load_settings()
     engine = make_engine(settings.db_url)
     sessions = make_session_factory(engine)
@@ -53,10 +59,8 @@ def create_app(settings: Settings | None = None, *, sweeper: bool = True,
         with session_scope(sessions) as session:
             await asyncio.to_thread(sync_builtin_planners, session)
         # What start-up built lives as long as the process: keep it out of the cyclic GC, whose
-        # full passes over it (~230k objects) stalled every request for 0.3-0.7 s under load.
-        # Once per process (a test process starts many apps).
-        import gc
-
+        # full passes over it stall every request under load. Once per process (a test process
+        # starts many apps).
         if gc.get_freeze_count() == 0:
             gc.collect()
             gc.freeze()
@@ -94,14 +98,12 @@ def create_app(settings: Settings | None = None, *, sweeper: bool = True,
     app.state.engine = engine
     app.state.sessions = sessions
     app.state.read_sessions = read_sessions
+    app.state.planner_check = planner_check
     app.include_router(health.router)
     for router in (areas.router, planners.router, jobs.router, groups.router, runs.router,
                    leaderboard.router, curves.router):
         app.include_router(router, prefix=API_PREFIX)
     install_middleware(app, settings)
-    from web import install_web  # the website reads through the server's layer
-
-    install_web(app)
     _install_error_handlers(app)
     return app
 

@@ -59,7 +59,7 @@ def ensure_area(session: Session, name: str) -> AreaRow:
     row = session.scalar(select(AreaRow).where(AreaRow.name == name))
     if row is not None:
         return row
-    from areas.registry import UnknownAreaError, area_names, load_area
+    from areas.registry import UnknownAreaError, area_names, load_area  # on use: see above
 
     try:
         area = load_area(name)
@@ -71,7 +71,7 @@ def ensure_area(session: Session, name: str) -> AreaRow:
 def sync_builtin_areas(factory: sessionmaker[Session]) -> None:
     """Rows for every built-in area. Each area is built first, then written in its own short
     transaction: building takes seconds, and SQLite allows one writer at a time."""
-    from areas.registry import area_names, load_area
+    from areas.registry import area_names, load_area  # the simulation stack, on use
 
     for name in area_names():
         area = load_area(name)
@@ -81,7 +81,7 @@ def sync_builtin_areas(factory: sessionmaker[Session]) -> None:
 
 
 def sync_builtin_planners(session: Session) -> None:
-    from planners.registry import planner_ids, spec
+    from planners.registry import planner_ids, spec  # the simulation stack, on use
 
     for planner_id in planner_ids():
         s = spec(planner_id)
@@ -121,6 +121,6 @@ def find_planner(session: Session, name: str) -> PlannerRow:
 
 
 def preset_names() -> list[str]:
-    from sim.config import PRESETS
+    from sim.config import PRESETS  # the simulation stack, on use
 
     return sorted(PRESETS)

@@ -130,7 +130,7 @@ def _planner_names(session: Session, names: list[str]) -> list[str]:
 
 def _areas(session: Session, names: list[str]) -> list[AreaRow]:
     if names == [ALL]:
-        from areas.registry import area_names
+        from areas.registry import area_names  # the simulation stack, on use
 
         names = area_names()
     rows = []

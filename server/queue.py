@@ -60,8 +60,6 @@ def make_celery(settings: Settings, name: str = "flybo") -> Celery:
 
 @lru_cache(maxsize=8)
 def _producer(broker: str, folder: str) -> Celery:
-    from server.settings import Settings
-
     return make_celery(Settings(broker_url=broker, data_dir=Path(folder)), name="flybo-producer")
 
 

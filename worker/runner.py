@@ -21,12 +21,15 @@ import socket
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import timedelta
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
+from celery.exceptions import SoftTimeLimitExceeded
 from sqlalchemy import Engine, or_, select, update
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -34,6 +37,7 @@ from server.db import make_engine, make_session_factory
 from server.models import (
     AreaRow,
     Artifact,
+    Base,
     FailureKind,
     Job,
     MetricSeries,
@@ -43,8 +47,15 @@ from server.models import (
     RunState,
     utcnow,
 )
+from server.planner_package import read_stored_package
 from server.settings import Settings
-from server.storage import ArtifactStore, ArtifactStoreError, open_store
+from server.storage import ArtifactStore, ArtifactStoreError, StoredArtifact, open_store
+from worker.sandbox.isolation import SandboxLimits
+
+if TYPE_CHECKING:
+    from areas import Area
+    from sim.interface import PlannerLike
+    from sim.result import EpisodeResult
 
 log = logging.getLogger(__name__)
 LOG_TAIL_LINES = 60
@@ -194,8 +205,10 @@ def _spec(factory: sessionmaker[Session], run_id: int) -> _RunSpec:
                         planner.config.get("code"), run.preset, run.seed, run.seconds)
 
 
-def _load_area(spec: _RunSpec, store: ArtifactStore) -> Any:
+def _load_area(spec: _RunSpec, store: ArtifactStore) -> Area:
     """The area, fetching an uploaded one from the artifact store if this machine lacks it."""
+    # The simulation stack (Open3D, numba) loads in the process that flies a run, not in
+    # Celery's parent process before it forks its pool.
     from areas.registry import UnknownAreaError, load_area
     from areas.store import areas_dir
 
@@ -244,9 +257,7 @@ def execute_run(run_id: int, settings: Settings) -> str:
 def _fly_and_store(factory: sessionmaker[Session], settings: Settings, held: Claim,
                    spec: _RunSpec, tmp: Path, run_log: RunLog, beat: Heartbeat,
                    wall0: float) -> str:
-    from celery.exceptions import SoftTimeLimitExceeded
-
-    from worker.sandbox.proxy import SandboxError
+    from worker.sandbox.proxy import SandboxError  # the simulation stack, see _load_area
 
     store = open_store(settings.artifacts, endpoint_url=settings.s3_endpoint_url,
                        cache_dir=settings.resolved_data_dir / "cache")
@@ -308,8 +319,8 @@ def _save_tail(factory: sessionmaker[Session], held: Claim, tail: str) -> None:
 
 
 def _simulate(spec: _RunSpec, tmp: Path, beat: Heartbeat, store: ArtifactStore,
-              settings: Settings) -> Any:
-    from areas import load_ground_truth
+              settings: Settings) -> EpisodeResult:
+    from areas import load_ground_truth  # the simulation stack, see _load_area
     from planners.registry import make
     from sim.config import preset
     from sim.episode import run_episode
@@ -328,7 +339,7 @@ def _simulate(spec: _RunSpec, tmp: Path, beat: Heartbeat, store: ArtifactStore,
             last_note[0] = t
             log.info("t = %.0f s, explored %.1f m³", t, volume)
 
-    def fly(planner: Any) -> Any:
+    def fly(planner: PlannerLike) -> EpisodeResult:
         return run_episode(area, truth, planner, preset(spec.preset), spec.seed,
                            planner_name=spec.planner, preset_name=spec.preset,
                            seconds=spec.seconds, recording_path=tmp / "recording.npz",
@@ -336,9 +347,7 @@ def _simulate(spec: _RunSpec, tmp: Path, beat: Heartbeat, store: ArtifactStore,
 
     if spec.planner_builtin and not settings.sandbox_builtin:
         return fly(make(spec.planner))
-    from worker.sandbox.isolation import SandboxLimits
-    from worker.sandbox.package import read_stored_package
-    from worker.sandbox.proxy import SandboxedPlanner
+    from worker.sandbox.proxy import SandboxedPlanner  # the simulation stack, see _load_area
 
     limits = SandboxLimits(plan_timeout_s=settings.sandbox_plan_timeout_s,
                            memory_mib=settings.sandbox_memory_mib,
@@ -359,8 +368,8 @@ def _simulate(spec: _RunSpec, tmp: Path, beat: Heartbeat, store: ArtifactStore,
                 log.info("planner output (last lines):\n%s", tail)
 
 
-def _write_files(result: Any, tmp: Path) -> dict[str, tuple[Path, str]]:
-    from sim.open3d_any import o3d
+def _write_files(result: EpisodeResult, tmp: Path) -> dict[str, tuple[Path, str]]:
+    from sim.open3d_any import o3d  # the simulation stack, see _load_area
 
     mesh_path = tmp / "mesh.ply"
     mesh = o3d.geometry.TriangleMesh(
@@ -374,7 +383,7 @@ def _write_files(result: Any, tmp: Path) -> dict[str, tuple[Path, str]]:
             "result": (result_path, "application/json")}
 
 
-def _f32(values: Any) -> bytes:
+def _f32(values: npt.ArrayLike) -> bytes:
     return np.asarray(values, dtype="<f4").tobytes()
 
 
@@ -382,9 +391,9 @@ def _opt(value: float) -> float | None:
     return float(value) if np.isfinite(value) else None
 
 
-def _result_rows(run_id: int, result: Any, spec: _RunSpec,
-                 stored: dict[str, tuple[Any, str]]) -> list[Any]:
-    from sim.metrics import timing_summary, volumetric_efficiency
+def _result_rows(run_id: int, result: EpisodeResult, spec: _RunSpec,
+                 stored: dict[str, tuple[StoredArtifact, str]]) -> list[Base]:
+    from sim.metrics import timing_summary, volumetric_efficiency  # see _load_area
 
     times = np.asarray(result.volume_times)
     volume = np.asarray(result.volume_m3)
@@ -392,7 +401,7 @@ def _result_rows(run_id: int, result: Any, spec: _RunSpec,
     at_plateau = volume[times <= plateau + 1e-6]
     timing = timing_summary(result.planning_times_ms)
     surface = result.surface
-    rows: list[Any] = [
+    rows: list[Base] = [
         RunResult(
             run_id=run_id, outcome=result.status.value, reason=result.reason,
             simulated_until_s=float(result.simulated_until),
@@ -425,7 +434,7 @@ _plateaus: dict[str, float] = {}
 
 
 def _plateau_s(spec: _RunSpec) -> float:
-    from areas.registry import load_area
+    from areas.registry import load_area  # the simulation stack, see _load_area
 
     if spec.area not in _plateaus:
         _plateaus[spec.area] = float(load_area(spec.area).plateau_s)
@@ -434,7 +443,7 @@ def _plateau_s(spec: _RunSpec) -> float:
 
 def _finish(factory: sessionmaker[Session], held: Claim, state: RunState, wall0: float, *,
             kind: FailureKind | None = None, error: str | None = None,
-            rows: Any = None) -> bool:
+            rows: Callable[[], list[Base]] | None = None) -> bool:
     """Set the final state (with the result rows) if this attempt still holds the run."""
     with factory() as session:
         changed = session.execute(update(Run).where(

@@ -65,6 +65,7 @@ def upload_area(
                                  description="metres per file unit")] = 1.0,
     up: Annotated[Literal["x", "y", "z", "-x", "-y", "-z"], Form()] = "z",
 ) -> AreaOut:
+    # The simulation stack (Open3D), loaded by the API when an area is first uploaded.
     from areas.importer import ImportLimits, MeshImportError, import_mesh
     from areas.registry import area_names
     from areas.store import AreaStoreError, save_area

@@ -13,6 +13,7 @@ from sqlalchemy.exc import IntegrityError
 from server.catalog import CatalogError, find_planner
 from server.deps import SessionDep, SettingsDep, UserDep
 from server.models import PlannerRow, User
+from server.planner_package import PackageError, PackageLimits, PlannerCheck, load_package
 from server.schemas import PlannerOut
 from server.storage import ArtifactStoreError, open_store
 
@@ -53,7 +54,8 @@ def get_planner(name: str, session: SessionDep) -> PlannerOut:
              responses={403: {"description": "the name belongs to another user"},
                         409: {"description": "a built-in planner's name"},
                         413: {"description": "too large"},
-                        422: {"description": "refused by the checks or the dry run"}})
+                        422: {"description": "refused by the checks or the dry run"},
+                        503: {"description": "no planner sandbox, or the store is away"}})
 def upload_planner(
     request: Request,
     session: SessionDep,
@@ -65,9 +67,6 @@ def upload_planner(
     description: Annotated[str, Form(max_length=2000)] = "",
 ) -> PlannerOut:
     """Check the code, dry-run it in the sandbox, and store it as the next version of `name`."""
-    from worker.sandbox.dry_run import dry_run
-    from worker.sandbox.package import PackageError, PackageLimits, load_package
-
     limits = PackageLimits(max_upload_bytes=int(settings.max_planner_upload_mib * 1024 * 1024),
                            max_unpacked_bytes=int(settings.max_planner_unpacked_mib * 1024 * 1024),
                            max_files=settings.max_planner_files)
@@ -90,6 +89,10 @@ def upload_planner(
         package = load_package(file.filename or "", data, limits)
     except PackageError as exc:
         raise HTTPException(422, f"planner rejected: {exc}") from None
+    dry_run: PlannerCheck | None = request.app.state.planner_check
+    if dry_run is None:
+        raise HTTPException(503, "this service was started without the planner sandbox and "
+                                 "cannot check uploaded planners")
     check = dry_run(package)
     if not check.passed:
         raise HTTPException(422, f"planner rejected by its dry run: {check.output[-3000:]}")

@@ -18,7 +18,7 @@ from fastapi.testclient import TestClient
 from sqlalchemy import create_engine, text
 from sqlalchemy.orm import Session, sessionmaker
 
-from server.app import create_app
+from flybo.app import create_app
 from server.db import make_engine, make_session_factory, session_scope
 from server.migrate import upgrade
 from server.security import create_token

@@ -11,6 +11,7 @@ from fastapi.testclient import TestClient
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
+from server.app import create_app as create_api
 from server.models import PlannerRow, Run
 from server.settings import Settings
 from worker.runner import execute_run
@@ -92,6 +93,19 @@ def test_size_limit_and_names(client: TestClient, tokens: Any,
     builtin = _upload(client, tokens.auth("alice"), "planner.py", GOOD, name="classic")
     assert builtin.status_code == 409 and "built-in" in builtin.json()["detail"]
     assert _upload(client, {}, "planner.py", GOOD).status_code == 401
+    assert _planner_rows(sessions) == 0
+
+
+def test_the_api_alone_checks_uploads_but_cannot_dry_run_them(
+    settings: Settings, tokens: Any, sessions: sessionmaker[Session],
+) -> None:
+    """`server.app.create_app` without a planner check (no sandbox): the static checks still
+    refuse bad code, good code is refused as unverifiable, and nothing is stored."""
+    with TestClient(create_api(settings, sweeper=False, sync_areas=False)) as api:
+        bad = _upload(api, tokens.auth("alice"), "planner.py", b"x = 1\n")
+        assert bad.status_code == 422 and "defines no class" in bad.json()["detail"]
+        good = _upload(api, tokens.auth("alice"), "planner.py", GOOD)
+        assert good.status_code == 503 and "sandbox" in good.json()["detail"]
     assert _planner_rows(sessions) == 0
 
 

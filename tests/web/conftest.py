@@ -22,7 +22,7 @@ import httpx
 import pytest
 from fastapi.testclient import TestClient
 
-from server.app import create_app
+from flybo.app import create_app
 from server.db import make_engine, make_session_factory, session_scope
 from server.migrate import upgrade
 from server.models import User

@@ -15,7 +15,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sqlalchemy.orm import Session, sessionmaker
+
+from server.db import make_engine, make_session_factory
 from server.settings import Settings
+from server.storage import ArtifactStore, open_store
 from web.replay.cache import RunCache
 from web.replay.session import ClientSession
 from web.replay.source import (
@@ -41,7 +45,7 @@ class ReplayApp:
         self.cache = RunCache(self._load)
         self.sessions: dict[int, ClientSession] = {}
         self._lock = threading.Lock()
-        self._db: tuple[Any, Any] | None = None
+        self._db: tuple[sessionmaker[Session], ArtifactStore] | None = None
         server.on_client_connect(self._connect)
         server.on_client_disconnect(self._disconnect)
 
@@ -92,13 +96,10 @@ class ReplayApp:
             raise RunLookupError(f"not a run id: {text!r}")
         return f"run:{run_id}"
 
-    def _database(self) -> tuple[Any, Any]:
+    def _database(self) -> tuple[sessionmaker[Session], ArtifactStore]:
         """The session factory and artifact store, made on first use: file mode needs neither."""
         with self._lock:
             if self._db is None:
-                from server.db import make_engine, make_session_factory
-                from server.storage import open_store
-
                 sessions = make_session_factory(make_engine(self.settings.db_url))
                 store = open_store(self.settings.artifacts,
                                    endpoint_url=self.settings.s3_endpoint_url,
@@ -164,7 +165,7 @@ def start_viewer(settings: Settings, host: str, port: int, *, recording: Path | 
     Raises:
         RunLookupError: `recording` cannot be read.
     """
-    import viser
+    import viser  # loads only once a viewer starts (the site imports web.replay too)
 
     server = viser.ViserServer(host=host, port=port, label="FLYBO replay", verbose=False)
     try:

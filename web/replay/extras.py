@@ -19,6 +19,7 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from areas import load_ground_truth
+from sim.open3d_any import o3d
 from web.replay.source import RunData
 
 TRUTH_DISPLAY_POINTS = 150_000
@@ -64,7 +65,7 @@ class ColouredMesh:
         with self._glb_lock:
             data = self._glb.get(clip_z)
             if data is None:
-                import trimesh
+                import trimesh  # only for the GLB export of a replayed mesh
 
                 keep = (self.vertices[self.faces, 2] <= clip_z).all(axis=1)
                 mesh = trimesh.Trimesh(self.vertices, self.faces[keep], process=False,
@@ -140,8 +141,6 @@ def display_cell(vertices: npt.NDArray[np.floating], faces: npt.NDArray[np.integ
 
 def read_mesh(path: Path) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]:
     """(V, 3) vertices and (F, 3) faces of a PLY (or any mesh file Open3D reads)."""
-    from sim.open3d_any import o3d
-
     mesh = o3d.io.read_triangle_mesh(str(path))
     return (np.asarray(mesh.vertices, dtype=np.float64),
             np.asarray(mesh.triangles, dtype=np.int64))

@@ -28,7 +28,7 @@ def read_query(client: Any, timeout: float = 5.0) -> dict[str, str]:
     Blocks until the tab answers: call it from a worker thread, never viser's event loop.
     """
     try:
-        from viser import _messages
+        from viser import _messages  # viser loads only once a viewer starts
     except ImportError:  # pragma: no cover - viser always ships it in 1.x
         return {}
     key = f"flybo-query-{client.client_id}"

@@ -50,7 +50,7 @@ class Layers:
 
 def wxyz_from_matrix(r: npt.NDArray[np.float64]) -> tuple[float, float, float, float]:
     """Unit quaternion (w, x, y, z) of a rotation matrix (3, 3)."""
-    from viser import transforms
+    from viser import transforms  # viser loads only once a viewer starts
 
     q = transforms.SO3.from_matrix(r).wxyz
     return (float(q[0]), float(q[1]), float(q[2]), float(q[3]))

@@ -18,6 +18,8 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
 from areas import Area, load_area
+from server.models import AreaRow, Artifact, MetricSeries, Run
+from server.storage import ArtifactStore, ArtifactStoreError
 from sim.camera import CameraConfig
 from sim.recording import Recording, RecordingError
 from web.replay.timeline import MapTimeline
@@ -163,8 +165,6 @@ def find_stored_run(session: Session, run_id: int) -> StoredRun:
     Raises:
         RunLookupError: no such run, or it has no recording (not finished, or failed early).
     """
-    from server.models import Artifact, MetricSeries, Run
-
     run = session.get(Run, run_id)
     if run is None:
         raise RunLookupError(f"run {run_id} does not exist")
@@ -182,14 +182,9 @@ def find_stored_run(session: Session, run_id: int) -> StoredRun:
     return StoredRun(run_id, title, artifacts["recording"], artifacts.get("mesh"), volume, recall)
 
 
-def load_stored_run(sessions: sessionmaker[Session], store: Any, run_id: int) -> RunData:
-    """A service run: its row and series from the database, its files from the artifact store.
-
-    Args:
-        store: a `server.storage.ArtifactStore`.
-    """
-    from server.storage import ArtifactStoreError
-
+def load_stored_run(sessions: sessionmaker[Session], store: ArtifactStore,
+                    run_id: int) -> RunData:
+    """A service run: its row and series from the database, its files from the artifact store."""
     with sessions() as session:
         stored = find_stored_run(session, run_id)
     try:
@@ -202,8 +197,6 @@ def load_stored_run(sessions: sessionmaker[Session], store: Any, run_id: int) ->
 
 def recent_runs(sessions: sessionmaker[Session], limit: int = 50) -> list[tuple[int, str]]:
     """(run id, label) of the latest runs that have a recording, newest first."""
-    from server.models import AreaRow, Artifact, Run
-
     with sessions() as session:
         rows = session.execute(
             select(Run.id, Run.status, Run.seed, AreaRow.name)

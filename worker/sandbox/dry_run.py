@@ -4,22 +4,14 @@ from __future__ import annotations
 
 import tempfile
 import time
-from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+from server.planner_package import CheckOutcome, PlannerPackage
 from worker.sandbox.isolation import SandboxLimits
-from worker.sandbox.package import PlannerPackage
 
 DRY_RUN_SECONDS = 10.0
-
-
-@dataclass(frozen=True)
-class CheckOutcome:
-    passed: bool
-    output: str
-    wall_s: float
 
 
 @lru_cache(maxsize=1)

@@ -2,14 +2,20 @@
 
 Each refusal raises `PackageError` naming the problem. An accepted upload becomes a normalised
 zip (sorted entries, fixed timestamps) whose SHA-256 is the planner version's code hash.
+
+The API checks uploads with these, the workers read stored packages back with them; the dry
+run that follows the checks needs the sandbox, so the API is handed one (`PlannerCheck`, see
+`server.app.create_app`) rather than importing the workers' code.
 """
 
 from __future__ import annotations
 
+import ast
 import hashlib
 import io
 import stat
 import zipfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
@@ -46,6 +52,20 @@ class PlannerPackage:
         return folder
 
 
+@dataclass(frozen=True)
+class CheckOutcome:
+    """The verdict of an uploaded planner's dry run, with its output for the owner."""
+
+    passed: bool
+    output: str
+    wall_s: float
+
+
+# Runs a checked package's planner for a few simulated seconds in the sandbox
+# (`worker.sandbox.dry_run.dry_run` is one).
+PlannerCheck = Callable[[PlannerPackage], CheckOutcome]
+
+
 def _check_name(name: str) -> str:
     if "\\" in name or name.startswith("/") or (len(name) > 1 and name[1] == ":"):
         raise PackageError(f"absolute or non-POSIX path in the archive: {name!r}")
@@ -73,8 +93,6 @@ def _check_source(name: str, data: bytes) -> None:
 def _check_defines_a_planner(source: bytes) -> None:
     """planner.py must define a class with a base named like `Planner` (checked statically, so
     that files that cannot be planners never reach the sandbox)."""
-    import ast
-
     tree = ast.parse(source.decode("utf-8"))
     for node in ast.walk(tree):
         if isinstance(node, ast.ClassDef):
