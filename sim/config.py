@@ -46,10 +46,12 @@ class EpisodeConfig(BaseModel):
         description="brake to a stop when an occupancy update finds an obstacle the vehicle "
         "could touch on the rest of the path being flown",
     )
-    planning_time_charge: Literal["wall", "none"] = Field(
-        "wall",
-        description="'wall' charges each plan call's wall time to the simulated clock; "
-        "'none' makes runs bit-for-bit repeatable",
+    planning_time_charge: Literal["cpu", "wall", "none"] = Field(
+        "cpu",
+        description="what a plan call costs on the simulated clock: 'cpu' the CPU time the "
+        "planner used (all its threads, read by the runner) in reference seconds "
+        "(`sim.reference_speed`), 'wall' its wall time (moves with machine load), 'none' "
+        "nothing (bit-for-bit repeatable)",
     )
     surface_tau_m: float = Field(0.05, gt=0.0, description="distance threshold of surface metrics")
     recall_interval_s: float = Field(20.0, gt=0.0)

@@ -29,6 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from areas.area import Area, GroundTruth
+from sim import reference_speed
 from sim.config import EpisodeConfig
 from sim.episode_recorder import EpisodeRecorder
 from sim.flight import Flight, hold_at, startup_spin
@@ -37,6 +38,7 @@ from sim.interface import Observation, Plan, PlannerContext, PlannerLike, PlanOu
 from sim.measures import EpisodeCounters, EpisodeEnd, EpisodeView, Measure, make_measures
 from sim.measures.base import ProgressCallback
 from sim.plan_check import PlanChecker, Start
+from sim.planning_charge import PlanningCharge
 from sim.result import EpisodeResult, RunStatus
 from sim.safety_monitor import SafetyMonitor
 from sim.sensing import RandomStreams, Sensing
@@ -59,6 +61,8 @@ def run_episode(
     seconds: float | None = None,
     recording_path: Path | None = None,
     progress: ProgressCallback | None = None,
+    speed_factor: float | None = None,
+    platform_errors: tuple[type[BaseException], ...] = (),
 ) -> EpisodeResult:
     """Run one exploration episode and measure it.
 
@@ -66,9 +70,18 @@ def run_episode(
         seconds: simulated time limit; the area's plateau time when None.
         recording_path: where to write the run recording (`.npz`), if anywhere.
         progress: called about once per simulated second with (time, explored volume m³).
+        speed_factor: this machine's speed over the reference's, for the 'cpu' planning
+            charge; measured once per process when None (`sim.reference_speed`).
+        platform_errors: exceptions that are the platform's, not the planner's (a worker's
+            time limit): raised from a `plan` call they end the run by propagating, instead of
+            being recorded as a planner failure.
     """
+    if speed_factor is None and config.planning_time_charge == "cpu":
+        speed_factor = reference_speed.speed_factor()
+    charge = PlanningCharge(config.planning_time_charge, speed_factor or 1.0, planner)
     loop = _EpisodeLoop(area, ground_truth, planner, config, seed, planner_name, preset_name,
-                        seconds if seconds is not None else area.plateau_s, progress)
+                        seconds if seconds is not None else area.plateau_s, progress, charge,
+                        platform_errors)
     try:
         result = loop.run()
     finally:
@@ -92,12 +105,14 @@ class _PlannerFailedError(Exception):
 class _EpisodeLoop:
     def __init__(self, area: Area, ground_truth: GroundTruth, planner: PlannerLike,
                  config: EpisodeConfig, seed: int, planner_name: str, preset_name: str,
-                 seconds: float, progress: ProgressCallback | None) -> None:
+                 seconds: float, progress: ProgressCallback | None, charge: PlanningCharge,
+                 platform_errors: tuple[type[BaseException], ...]) -> None:
         if not (seconds > 0 and math.isfinite(seconds)):
             raise ValueError(f"seconds must be a positive number, got {seconds}")
         self.area, self.planner, self.cfg = area, planner, config
         self.seed, self.planner_name, self.preset_name = seed, planner_name, preset_name
         self.t_end = float(seconds)
+        self.charge, self.platform_errors = charge, platform_errors
         self.streams = RandomStreams.from_seed(seed)
         self.costs = StageCosts()
         self.sensing = Sensing(area, config, self.streams, self.costs)
@@ -246,18 +261,20 @@ class _EpisodeLoop:
             time=self.world.time, pose=pose, velocity=self.world.velocity.copy(),
             map=self.sensing.mapping.view(), last_outcome=outcome,
         )
-        t0 = time.perf_counter()
+        t0, cpu0 = time.perf_counter(), self.charge.cpu_seconds()
         try:
             plan = self.planner.plan(obs)
+        except self.platform_errors:
+            raise
         except Exception as exc:  # a planner bug ends its run, not the process
             raise _PlannerFailedError(f"planner raised {type(exc).__name__}: {exc}") from exc
         elapsed = time.perf_counter() - t0
+        charge = self.charge.seconds(elapsed, self.charge.cpu_seconds() - cpu0)
         self.costs.planner += elapsed
         self.counters.planning_ms.append(1000.0 * elapsed)
+        self.counters.charged_s.append(charge)
         if not isinstance(plan, Plan):
             raise _PlannerFailedError(f"planner returned {type(plan).__name__}, not a Plan")
-        charge = elapsed if self.cfg.planning_time_charge == "wall" else 0.0
-        self.counters.charged_s.append(charge)
         if charge > 0:
             self._think(charge, flight)
         return plan
@@ -334,6 +351,9 @@ class _EpisodeLoop:
 
     def _finish(self, ending: _Ending, simulated_until: float, wall0: float) -> EpisodeResult:
         t0 = time.perf_counter()
+        self.recorder.finish(simulated_until, self.sensing)
+        self.costs.recording += time.perf_counter() - t0
+        t0 = time.perf_counter()
         end = EpisodeEnd(ending.status, self.t_end, simulated_until)
         done: dict[str, Any] = {}
         for measure in self.measures:
@@ -353,7 +373,7 @@ class _EpisodeLoop:
             simulated_until=simulated_until, wall_seconds=time.perf_counter() - wall0,
             explored_volume_m3=self.sensing.mapping.occupancy.explored_volume_m3,
             observable_volume_m3=self.view.truth.observable_volume_m3,
-            coverage=done["coverage"], collisions=done["collisions"],
+            coverage=done["coverage"].coverage, collisions=done["collisions"],
             path_length_m=done["path_length"], iterations=done["planning"].iterations,
             planning_times_ms=done["planning"].wall_ms, surface=done["surface"],
             volume_times=volume.times, volume_m3=volume.values,
@@ -361,6 +381,7 @@ class _EpisodeLoop:
             frame_costs_ms=self.costs.per_frame_ms(),
             mesh_vertices=mesh.vertices, mesh_triangles=mesh.triangles,
             safety_stops=done["safety_stops"], metrics=metrics,
+            charged_s=done["planning"].charged_s, charge=self.charge.describe(),
         )
 
 

@@ -27,6 +27,7 @@ class EpisodeRecorder:
         })
         self.next_pose = 0.0
         self.next_keyframe = 0.0
+        self.last_keyframe: float | None = None
         self.next_surface = config.surface_snapshot_interval_s
 
     def pose(self, now: float, position: np.ndarray, yaw: float) -> None:
@@ -38,12 +39,22 @@ class EpisodeRecorder:
     def frame(self, stamp: float, sensing: Sensing) -> None:
         """After a camera frame: map keyframes and surface snapshots when they are due."""
         if stamp >= self.next_keyframe - 1e-9:
-            self.writer.map_keyframe(stamp, sensing.mapping.occupancy.state)
+            self._keyframe(stamp, sensing)
             self.next_keyframe += self.cfg.keyframe_interval_s
         if stamp >= self.next_surface - 1e-9:
             self.writer.surface(stamp, sensing.tsdf.surface_points(),
                                 self.cfg.surface_snapshot_voxel_m)
             self.next_surface += self.cfg.surface_snapshot_interval_s
+
+    def _keyframe(self, stamp: float, sensing: Sensing) -> None:
+        self.writer.map_keyframe(stamp, sensing.mapping.occupancy.state)
+        self.last_keyframe = stamp
+
+    def finish(self, now: float, sensing: Sensing) -> None:
+        """At the end of the run: a last map keyframe, unless one was just written, so that
+        the replay ends on the map that was scored."""
+        if self.last_keyframe is None or now > self.last_keyframe + 1e-9:
+            self._keyframe(now, sensing)
 
     def plan(self, now: float, waypoints: np.ndarray) -> None:
         self.writer.plan(now, waypoints)

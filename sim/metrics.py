@@ -11,6 +11,13 @@ from scipy.spatial import cKDTree
 
 Points = npt.NDArray[np.floating]
 
+# Distances are compared with tau plus this tolerance. The TSDF's voxel equals tau (5 cm), so
+# marching-cubes vertices of a surface on the grid lie at exactly tau from the truth and a
+# float's rounding would decide whether they count; 0.1 mm is far above any rounding of
+# coordinates within a few hundred metres (float32's spacing at 200 m is 15 µm) and far below
+# anything a reconstruction resolves (`docs/metrics.md` shows the sensitivity).
+TIE_TOLERANCE_M = 1e-4
+
 
 @dataclass(frozen=True)
 class SurfaceScores:
@@ -59,10 +66,9 @@ def surface_recall(reconstruction: Points, truth: Points, tau_m: float) -> float
         return 0.0
     if len(reconstruction) == 0:
         return 0.0
-    # The bound is exclusive; nudge it so that a distance of exactly tau counts, as in precision.
-    dist, _ = cKDTree(reconstruction).query(
-        truth, k=1, distance_upper_bound=float(np.nextafter(tau_m, np.inf))
-    )
+    # The bound is exclusive; nudge it so that a distance of exactly the bound counts.
+    bound = float(np.nextafter(tau_m + TIE_TOLERANCE_M, np.inf))
+    dist, _ = cKDTree(reconstruction).query(truth, k=1, distance_upper_bound=bound)
     return float(np.count_nonzero(np.isfinite(dist))) / len(truth)
 
 
@@ -81,7 +87,8 @@ def sdf_surface_recall(
     """
     if len(sdf_at_truth) == 0:
         return 0.0
-    seen = (np.asarray(weight_at_truth) >= min_weight) & (np.abs(sdf_at_truth) <= tau_m)
+    seen = (np.asarray(weight_at_truth) >= min_weight) & \
+        (np.abs(sdf_at_truth) <= tau_m + TIE_TOLERANCE_M)
     return float(np.count_nonzero(seen)) / len(sdf_at_truth)
 
 
@@ -107,7 +114,7 @@ def surface_scores(
         to_truth = cKDTree(truth).query(reconstruction, k=1)[0]
     else:
         to_truth = np.asarray(distance_to_truth(reconstruction), dtype=np.float64)
-    precision = float(np.mean(to_truth <= tau_m))
+    precision = float(np.mean(to_truth <= tau_m + TIE_TOLERANCE_M))
     recall = surface_recall(reconstruction, truth, tau_m)
     # Summed in sorted order: Open3D extracts mesh vertices in a thread-dependent order, and the
     # score must not depend on it.

@@ -58,6 +58,9 @@ class EpisodeResult:
     # Every number the registered measures report (`sim.measures.metric_infos`), None where
     # undefined.
     metrics: dict[str, float | None] = field(default_factory=dict)
+    # Per plan call, seconds charged to the simulated clock (N,), and how they were charged.
+    charged_s: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    charge: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -82,6 +85,9 @@ class EpisodeResult:
             "path_length_m": self.path_length_m,
             "iterations": self.iterations,
             "planning_time_ms": timing_summary(self.planning_times_ms),
+            "planning_charge": {**self.charge,
+                                "total_s": float(np.sum(self.charged_s)),
+                                "per_call_s": timing_summary(self.charged_s)},
             "surface": _finite(self.surface.as_dict()),
             "frame_costs_ms": self.frame_costs_ms,
             "metrics": dict(self.metrics),

@@ -129,5 +129,7 @@ class Measure(ABC):
 def _finite_or_none(value: Any) -> float | None:
     if value is None:
         return None
+    if isinstance(value, int | np.integer) and not isinstance(value, bool):
+        return int(value)  # counts stay whole numbers in the result file
     number = float(value)
     return number if np.isfinite(number) else None

@@ -69,4 +69,4 @@ class Planning(Measure):
 
     def scalars(self, value: Any) -> dict[str, float | None]:
         times: PlanningTimes = value
-        return {"iterations": float(times.iterations)}
+        return {"iterations": times.iterations}

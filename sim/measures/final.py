@@ -14,17 +14,36 @@ from sim.measures.series import subsample
 from sim.metrics import SurfaceScores, coverage, surface_scores
 
 
+@dataclass(frozen=True)
+class CoverageResult:
+    """`explored_observable_m3`: known voxels that could be observed, m³; `coverage`: that over
+    the observable volume."""
+
+    explored_observable_m3: float
+    coverage: float
+
+
 class Coverage(Measure):
-    """Absolute coverage: explored voxels that could be observed, over the observable volume
-    (noise also marks voxels inside walls, which are not counted)."""
+    """Absolute coverage: explored voxels that could be observed, over the observable volume.
+    Noise also marks voxels inside walls, which are not counted, here or in the explored
+    observable volume that the paper's relative coverage is computed from."""
 
     name = "coverage"
-    metrics = (MetricInfo("coverage", "coverage", leaderboard=True),)
+    metrics = (
+        MetricInfo("coverage", "coverage", leaderboard=True),
+        MetricInfo("explored_observable_m3", "explored observable volume", unit="m³", fmt=".1f"),
+    )
 
-    def result(self, ep: EpisodeView, end: EpisodeEnd, done: Mapping[str, Any]) -> float:
+    def result(self, ep: EpisodeView, end: EpisodeEnd,
+               done: Mapping[str, Any]) -> CoverageResult:
         known = ep.mapping.occupancy.state != 0
         explored = float(np.count_nonzero(known & ep.truth.observable)) * ep.area.voxel_size**3
-        return coverage(explored, ep.truth.observable_volume_m3)
+        return CoverageResult(explored, coverage(explored, ep.truth.observable_volume_m3))
+
+    def scalars(self, value: Any) -> dict[str, float | None]:
+        result: CoverageResult = value
+        return {"coverage": result.coverage,
+                "explored_observable_m3": result.explored_observable_m3}
 
 
 @dataclass(frozen=True)
@@ -60,7 +79,7 @@ class SurfaceQuality(Measure):
     )
 
     def reset(self, ep: EpisodeView) -> None:
-        self.truth = subsample(ep.truth.surface_points, ep.config.final_recall_points, ep.seed)
+        self.truth = subsample(ep.truth.surface_points, ep.config.final_recall_points)
 
     def result(self, ep: EpisodeView, end: EpisodeEnd, done: Mapping[str, Any]) -> SurfaceScores:
         mesh: Mesh = done["reconstruction"]
