@@ -185,7 +185,7 @@ def _sources(modules: dict[str, tuple[str, str]]) -> list[list[str]]:
     return [[rel, text] for rel, text in sorted(modules.values())]
 
 
-def _package_sources(package: str) -> list[list[str]]:
+def package_sources(package: str) -> list[list[str]]:
     """[relative path, source] of every ``*.py`` file under `package`, sorted by path."""
     base = _top_level_location(package)
     if base is None or not base.is_dir():
@@ -229,7 +229,7 @@ def _describe_callable(fn: Any) -> Any:
 
 
 def _sim_hash() -> str:
-    return _sha256(_package_sources("sim"))
+    return _sha256(package_sources("sim"))
 
 
 def _presets_hash() -> str:

@@ -305,6 +305,6 @@ def test_package_sources_skip_pycache(planner_package: Path) -> None:
     cache = planner_package / "__pycache__"
     cache.mkdir()
     (cache / "stale.py").write_text("x = 3\n", encoding="utf-8")
-    names = [rel for rel, _ in versions._package_sources("zz_fp_pkg")]
+    names = [rel for rel, _ in versions.package_sources("zz_fp_pkg")]
     assert names == ["zz_fp_pkg/__init__.py", "zz_fp_pkg/helpers.py", "zz_fp_pkg/planner.py",
                      "zz_fp_pkg/unused.py"]
