@@ -23,11 +23,11 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from areas import load_area, load_ground_truth  # noqa: E402
-from benchmarks.common import print_table, write_json  # noqa: E402
-from planners.registry import make  # noqa: E402
-from sim.config import preset  # noqa: E402
-from sim.episode import run_episode  # noqa: E402
+from areas import load_area, load_ground_truth
+from benchmarks.common import print_table, write_json
+from planners.registry import make
+from sim.config import preset
+from sim.episode import run_episode
 
 DEFAULT_PLANNERS = "classic,rapid,splatplanner,nbvp,esm-ipp"
 
