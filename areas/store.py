@@ -1,7 +1,11 @@
 """Imported (custom) areas saved on disk, so that `flybo run --area NAME` finds them later.
 
-One `.npz` file per area in `areas_dir()`: the mesh, bounds, start pose, plateau time, voxel
-size and Table 1 statistics. Written atomically; the name is the file's stem.
+One `.npz` file per area in a folder: the mesh, bounds, start pose, plateau time, voxel size
+and Table 1 statistics. Written atomically; the name is the file's stem.
+
+Every function takes the folder (`folder=`); without one it is `areas_dir()`, the default
+that the area registry and `flybo run` use. The service passes its own (`Settings.areas_dir`,
+which is the same folder unless the settings name another data folder).
 """
 
 from __future__ import annotations
@@ -29,27 +33,30 @@ class AreaStoreError(ValueError):
 
 
 def areas_dir() -> Path:
-    """``$FLYBO_DATA_DIR/areas`` if the variable is set, else ``~/.local/share/flybo/areas``."""
+    """``$FLYBO_DATA_DIR/areas`` if the variable is set, else ``~/.local/share/flybo/areas``:
+    the rule of the service's `server.settings.Settings.areas_dir` (which this layer does not
+    import)."""
     configured = os.environ.get(DATA_ENV)
     root = Path(configured).expanduser() if configured else Path.home() / ".local/share/flybo"
     return root / "areas"
 
 
-def stored_area_names() -> list[str]:
-    """Names of the saved areas, sorted."""
-    folder = areas_dir()
+def stored_area_names(folder: Path | None = None) -> list[str]:
+    """Names of the areas saved in `folder` (default `areas_dir()`), sorted."""
+    folder = folder or areas_dir()
     if not folder.is_dir():
         return []
     return sorted(p.stem for p in folder.glob("*.npz") if NAME_PATTERN.match(p.stem))
 
 
-def save_area(area: Area, *, overwrite: bool = False) -> Path:
-    """Save `area` under its name; refuses to replace an existing one unless `overwrite`."""
+def save_area(area: Area, *, overwrite: bool = False, folder: Path | None = None) -> Path:
+    """Save `area` under its name in `folder` (default `areas_dir()`); refuses to replace an
+    existing one unless `overwrite`."""
     if not NAME_PATTERN.match(area.name):
         raise AreaStoreError(
             f"invalid area name {area.name!r}: 1-40 lower-case letters, digits and hyphens"
         )
-    folder = areas_dir()
+    folder = folder or areas_dir()
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{area.name}.npz"
     if path.exists() and not overwrite:
@@ -73,11 +80,12 @@ def save_area(area: Area, *, overwrite: bool = False) -> Path:
     return path
 
 
-def load_stored_area(name: str) -> Area:
-    """The saved area called `name`."""
-    path = areas_dir() / f"{name}.npz"
+def load_stored_area(name: str, folder: Path | None = None) -> Area:
+    """The area called `name` saved in `folder` (default `areas_dir()`)."""
+    folder = folder or areas_dir()
+    path = folder / f"{name}.npz"
     if not NAME_PATTERN.match(name) or not path.is_file():
-        raise AreaStoreError(f"no stored area named {name!r} in {areas_dir()}")
+        raise AreaStoreError(f"no stored area named {name!r} in {folder}")
     try:
         with np.load(path, allow_pickle=False) as data:
             header = json.loads(str(data["header"]))

@@ -1,8 +1,18 @@
 """The service's settings: one pydantic-settings class, read from `FLYBO_*` environment variables.
 
-Defaults give the embedded service: SQLite and a filesystem broker under `FLYBO_DATA_DIR`
-(default `./data`), artifacts in a local folder. Scale-out sets `FLYBO_DATABASE_URL`,
-`FLYBO_BROKER_URL` and `FLYBO_ARTIFACT_URL` (see `docs/service.md`).
+Every folder the CLI, the API and the workers use comes from here. Two roots:
+
+- `data_dir` (`FLYBO_DATA_DIR`, default `~/.local/share/flybo`): what must be kept. The
+  embedded service's SQLite database and filesystem broker, the local artifact store
+  (`artifacts/`) and the stored areas (`areas/`).
+- `cache_dir` (`FLYBO_CACHE_DIR`, default `~/.cache/flybo`): what can be rebuilt. Downloaded
+  copies of remote artifacts (`artifacts/`); the areas' ground truth and thumbnails live there
+  too (`areas.cache`).
+
+Without the variables, the areas library (`areas.store`, `areas.cache`) uses the same defaults
+on its own, so `flybo run` and `flybo areas import` see the areas the service stored.
+Scale-out sets `FLYBO_DATABASE_URL`, `FLYBO_BROKER_URL` and `FLYBO_ARTIFACT_URL` (see
+`docs/service.md`).
 """
 
 from __future__ import annotations
@@ -18,13 +28,26 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 DEVELOPMENT_SECRET = "development-only-secret-do-not-use-in-production"
 
 
+def default_data_dir() -> Path:
+    """`data_dir` when `FLYBO_DATA_DIR` is not set (the rule of `areas.store.areas_dir` too)."""
+    return Path.home() / ".local" / "share" / "flybo"
+
+
+def default_cache_dir() -> Path:
+    """`cache_dir` when `FLYBO_CACHE_DIR` is not set (the rule of `areas.cache.cache_dir` too)."""
+    return Path.home() / ".cache" / "flybo"
+
+
 class Settings(BaseSettings):
     """Everything the API, the workers and the CLI client are configured by."""
 
     model_config = SettingsConfigDict(env_prefix="FLYBO_", extra="ignore")
 
     environment: Literal["development", "production"] = "development"
-    data_dir: Path = Field(default=Path("data"), description="root of the embedded defaults")
+    data_dir: Path = Field(default_factory=default_data_dir,
+                           description="what must be kept: database, broker, artifacts, areas")
+    cache_dir: Path = Field(default_factory=default_cache_dir,
+                            description="what can be rebuilt: downloaded artifacts")
     database_url: str | None = Field(default=None, description="SQLAlchemy URL; default SQLite")
     broker_url: str | None = Field(default=None, description="Celery broker; default filesystem")
     artifact_url: str | None = Field(
@@ -87,6 +110,25 @@ class Settings(BaseSettings):
     def resolved_data_dir(self) -> Path:
         return self.data_dir.expanduser().resolve()
 
+    @cached_property
+    def resolved_cache_dir(self) -> Path:
+        return self.cache_dir.expanduser().resolve()
+
+    @property
+    def areas_dir(self) -> Path:
+        """Stored (uploaded or imported) areas, one `.npz` file each (`areas.store`)."""
+        return self.resolved_data_dir / "areas"
+
+    @property
+    def artifacts_dir(self) -> Path:
+        """The local artifact store, unless `artifact_url` names another."""
+        return self.resolved_data_dir / "artifacts"
+
+    @property
+    def artifact_cache_dir(self) -> Path:
+        """Local copies of artifacts from a remote (S3) store."""
+        return self.resolved_cache_dir / "artifacts"
+
     @property
     def db_url(self) -> str:
         if self.database_url:
@@ -106,7 +148,7 @@ class Settings(BaseSettings):
     def artifacts(self) -> str:
         if self.artifact_url:
             return self.artifact_url
-        return (self.resolved_data_dir / "artifacts").as_uri()
+        return self.artifacts_dir.as_uri()
 
     @property
     def max_area_upload_bytes(self) -> int:

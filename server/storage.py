@@ -12,8 +12,11 @@ import shutil
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 from urllib.parse import unquote, urlparse
+
+if TYPE_CHECKING:
+    from server.settings import Settings
 
 
 class ArtifactStoreError(RuntimeError):
@@ -129,3 +132,9 @@ def open_store(url: str, *, endpoint_url: str | None = None,
         cache = cache_dir or Path(tempfile.gettempdir()) / "flybo-artifacts"
         return S3ArtifactStore(parsed.netloc, parsed.path, endpoint_url, cache)
     raise ArtifactStoreError(f"unsupported artifact store URL {url!r}: use file:// or s3://")
+
+
+def settings_store(settings: Settings) -> ArtifactStore:
+    """The store `settings` name, with its S3 endpoint and local cache folder."""
+    return open_store(settings.artifacts, endpoint_url=settings.s3_endpoint_url,
+                      cache_dir=settings.artifact_cache_dir)

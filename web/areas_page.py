@@ -16,7 +16,7 @@ from fastapi import APIRouter
 from fastapi.responses import FileResponse, HTMLResponse, Response
 from sqlalchemy import select
 
-from server.deps import SessionDep
+from server.deps import SessionDep, SettingsDep
 from server.models import AreaRow
 from server.routes.areas import area_out
 from server.schemas import AreaOut
@@ -107,14 +107,19 @@ def areas_page(session: SessionDep) -> HTMLResponse:
     return page("Areas", body, scripts=("sort.js",), current="/areas")
 
 
-def _thumbnail(name: str, view: Literal["top", "perspective"]) -> Path | None:
+def _thumbnail(name: str, view: Literal["top", "perspective"], areas_dir: Path) -> Path | None:
+    """The image of a built-in area, or of one stored in `areas_dir` (`Settings.areas_dir`)."""
     try:
-        from areas.registry import load_area
+        from areas.registry import area_names, load_area
+        from areas.store import load_stored_area, stored_area_names
         from areas.thumbnail import thumbnail_paths, write_thumbnails
     except ImportError:  # an installation without the thumbnail renderer
         return None
     try:
-        area = load_area(name)
+        if name not in area_names() and name in stored_area_names(areas_dir):
+            area = load_stored_area(name, areas_dir)
+        else:
+            area = load_area(name)
     except Exception:  # an unknown or unreadable area has no image; the page says so
         return None
     top, perspective = thumbnail_paths(area)
@@ -131,11 +136,11 @@ def _thumbnail(name: str, view: Literal["top", "perspective"]) -> Path | None:
 
 
 @router.get("/areas/{name}/thumbnail.png", response_model=None)
-def thumbnail(name: str, session: SessionDep,
+def thumbnail(name: str, session: SessionDep, settings: SettingsDep,
               view: Literal["top", "perspective"] = "top") -> Response:
     if session.scalar(select(AreaRow.id).where(AreaRow.name == name)) is None:
         return not_found(f"No area named {name}.")
-    path = _thumbnail(name, view)
+    path = _thumbnail(name, view, settings.areas_dir)
     if path is None or not path.exists():
         return not_found(f"No thumbnail of {name}.")
     return FileResponse(path, media_type="image/png",

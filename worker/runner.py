@@ -49,7 +49,7 @@ from server.models import (
 )
 from server.planner_package import read_stored_package
 from server.settings import Settings
-from server.storage import ArtifactStore, ArtifactStoreError, StoredArtifact, open_store
+from server.storage import ArtifactStore, ArtifactStoreError, StoredArtifact, settings_store
 from worker.sandbox.isolation import SandboxLimits
 
 if TYPE_CHECKING:
@@ -205,25 +205,27 @@ def _spec(factory: sessionmaker[Session], run_id: int) -> _RunSpec:
                         planner.config.get("code"), run.preset, run.seed, run.seconds)
 
 
-def _load_area(spec: _RunSpec, store: ArtifactStore) -> Area:
-    """The area, fetching an uploaded one from the artifact store if this machine lacks it."""
+def _load_area(spec: _RunSpec, store: ArtifactStore, folder: Path) -> Area:
+    """The area: a built-in (or locally imported) one by name, or an uploaded one from `folder`
+    (`Settings.areas_dir`), fetched from the artifact store first if this machine lacks it."""
     # The simulation stack (Open3D, numba) loads in the process that flies a run, not in
     # Celery's parent process before it forks its pool.
-    from areas.registry import UnknownAreaError, load_area
-    from areas.store import areas_dir
+    from areas.registry import load_area
+    from areas.store import AreaStoreError, load_stored_area
 
-    try:
+    if spec.area_file is None:
         return load_area(spec.area)
-    except UnknownAreaError:
-        if spec.area_file is None:
-            raise
+    try:
+        return load_stored_area(spec.area, folder)
+    except AreaStoreError:
+        pass  # not on this machine yet, or damaged: fetch it again
     source = store.open_path(spec.area_file)
-    target = areas_dir() / f"{spec.area}.npz"
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_suffix(".part")
-    tmp.write_bytes(source.read_bytes())
-    os.replace(tmp, target)
-    return load_area(spec.area)
+    target = folder / f"{spec.area}.npz"
+    folder.mkdir(parents=True, exist_ok=True)
+    part = folder / f".{spec.area}.{os.getpid()}.part"
+    part.write_bytes(source.read_bytes())
+    os.replace(part, target)
+    return load_stored_area(spec.area, folder)
 
 
 def execute_run(run_id: int, settings: Settings) -> str:
@@ -259,13 +261,13 @@ def _fly_and_store(factory: sessionmaker[Session], settings: Settings, held: Cla
                    wall0: float) -> str:
     from worker.sandbox.proxy import SandboxError  # the simulation stack, see _load_area
 
-    store = open_store(settings.artifacts, endpoint_url=settings.s3_endpoint_url,
-                       cache_dir=settings.resolved_data_dir / "cache")
+    store = settings_store(settings)
     log.info("run %s attempt %s on %s: %s on %s, seed %s, preset %s, %.0f s", held.run_id,
              held.attempt, worker_name(), spec.planner, spec.area, spec.seed, spec.preset,
              spec.seconds)
     try:
-        result = _simulate(spec, tmp, beat, store, settings)
+        area = _load_area(spec, store, settings.areas_dir)
+        result = _simulate(spec, area, tmp, beat, store, settings)
         outcome = result.status.value
         log.info("run %s %s: %s; coverage %.4f, F-score %.4f", held.run_id, outcome,
                  result.reason, result.coverage, result.surface.fscore)
@@ -302,7 +304,7 @@ def _fly_and_store(factory: sessionmaker[Session], settings: Settings, held: Cla
         factory, held, RunState.FAILED if failed else RunState.SUCCEEDED, wall0,
         kind=FailureKind.PLANNER if failed else None,
         error=result.reason if failed else None,
-        rows=lambda: _result_rows(held.run_id, result, spec, stored),
+        rows=lambda: _result_rows(held.run_id, result, area.plateau_s, stored),
     )
     return outcome if done else "lost its claim"
 
@@ -318,14 +320,13 @@ def _save_tail(factory: sessionmaker[Session], held: Claim, tail: str) -> None:
         log.warning("could not save the log tail of run %s: %s", held.run_id, exc)
 
 
-def _simulate(spec: _RunSpec, tmp: Path, beat: Heartbeat, store: ArtifactStore,
+def _simulate(spec: _RunSpec, area: Area, tmp: Path, beat: Heartbeat, store: ArtifactStore,
               settings: Settings) -> EpisodeResult:
     from areas import load_ground_truth  # the simulation stack, see _load_area
     from planners.registry import make
     from sim.config import preset
     from sim.episode import run_episode
 
-    area = _load_area(spec, store)
     truth = load_ground_truth(area)
     last_note = [0.0]
 
@@ -391,14 +392,13 @@ def _opt(value: float) -> float | None:
     return float(value) if np.isfinite(value) else None
 
 
-def _result_rows(run_id: int, result: EpisodeResult, spec: _RunSpec,
+def _result_rows(run_id: int, result: EpisodeResult, plateau_s: float,
                  stored: dict[str, tuple[StoredArtifact, str]]) -> list[Base]:
     from sim.metrics import timing_summary, volumetric_efficiency  # see _load_area
 
     times = np.asarray(result.volume_times)
     volume = np.asarray(result.volume_m3)
-    plateau = _plateau_s(spec)
-    at_plateau = volume[times <= plateau + 1e-6]
+    at_plateau = volume[times <= plateau_s + 1e-6]
     timing = timing_summary(result.planning_times_ms)
     surface = result.surface
     rows: list[Base] = [
@@ -428,17 +428,6 @@ def _result_rows(run_id: int, result: EpisodeResult, spec: _RunSpec,
                              size_bytes=artifact.size_bytes, sha256=artifact.sha256,
                              content_type=ctype))
     return rows
-
-
-_plateaus: dict[str, float] = {}
-
-
-def _plateau_s(spec: _RunSpec) -> float:
-    from areas.registry import load_area  # the simulation stack, see _load_area
-
-    if spec.area not in _plateaus:
-        _plateaus[spec.area] = float(load_area(spec.area).plateau_s)
-    return _plateaus[spec.area]
 
 
 def _finish(factory: sessionmaker[Session], held: Claim, state: RunState, wall0: float, *,

@@ -15,7 +15,7 @@ from server.deps import SessionDep, SettingsDep, UserDep
 from server.mesh_guard import MeshGuardError, prescan
 from server.models import AreaRow
 from server.schemas import AreaOut
-from server.storage import ArtifactStoreError, open_store
+from server.storage import ArtifactStoreError, settings_store
 
 router = APIRouter(prefix="/areas", tags=["areas"])
 
@@ -100,11 +100,11 @@ def upload_area(
         except MeshImportError as exc:
             raise HTTPException(422, f"mesh rejected: {exc}") from None
         try:
-            saved = save_area(area)
+            saved = save_area(area, folder=settings.areas_dir)
         except AreaStoreError as exc:
             raise HTTPException(409, str(exc)) from None
         try:
-            stored = open_store(settings.artifacts).put(AREA_FILE_KEY.format(name=name), saved)
+            stored = settings_store(settings).put(AREA_FILE_KEY.format(name=name), saved)
         except ArtifactStoreError as exc:
             saved.unlink(missing_ok=True)
             raise HTTPException(503, f"could not store the area: {exc}") from None

@@ -15,7 +15,7 @@ from server.deps import SessionDep, SettingsDep, UserDep
 from server.models import PlannerRow, User
 from server.planner_package import PackageError, PackageLimits, PlannerCheck, load_package
 from server.schemas import PlannerOut
-from server.storage import ArtifactStoreError, open_store
+from server.storage import ArtifactStoreError, settings_store
 
 router = APIRouter(prefix="/planners", tags=["planners"])
 
@@ -103,8 +103,7 @@ def upload_planner(
         path = Path(tmp) / "code.zip"
         path.write_bytes(package.zip_bytes)
         try:
-            stored = open_store(settings.artifacts, endpoint_url=settings.s3_endpoint_url,
-                                cache_dir=settings.resolved_data_dir / "cache").put(key, path)
+            stored = settings_store(settings).put(key, path)
         except ArtifactStoreError as exc:
             raise HTTPException(503, f"could not store the planner: {exc}") from None
     row = PlannerRow(name=name, version=version, builtin=False, owner_id=user.id,

@@ -15,7 +15,7 @@ from server.deps import IdPath, SessionDep, SettingsDep, UserDep
 from server.jobs import may_manage
 from server.models import Artifact, Job, MetricSeries, Run, RunState
 from server.schemas import ArtifactOut, ErrorBody, ResultOut, RunOut, SeriesOut
-from server.storage import ArtifactStoreError, open_store
+from server.storage import ArtifactStoreError, settings_store
 
 router = APIRouter(prefix="/runs", tags=["runs"])
 
@@ -87,9 +87,7 @@ def get_artifact(run_id: IdPath, kind: str, session: SessionDep,
     if artifact is None:
         raise HTTPException(404, f"run {run_id} has no {kind} artifact")
     try:
-        path = open_store(settings.artifacts, endpoint_url=settings.s3_endpoint_url,
-                          cache_dir=settings.resolved_data_dir / "cache").open_path(
-            artifact.location)
+        path = settings_store(settings).open_path(artifact.location)
     except ArtifactStoreError as exc:
         raise HTTPException(404, str(exc)) from None
     filename, content_type = ARTIFACT_FILES[kind]
@@ -109,9 +107,8 @@ def get_log(run_id: IdPath, session: SessionDep, settings: SettingsDep, user: Us
     artifact = next((a for a in run.artifacts if a.kind == "log"), None)
     if artifact is not None:
         with contextlib.suppress(ArtifactStoreError):  # else the live tail is still there
-            text = open_store(settings.artifacts, endpoint_url=settings.s3_endpoint_url,
-                              cache_dir=settings.resolved_data_dir / "cache").open_path(
-                artifact.location).read_text(errors="replace")
+            text = settings_store(settings).open_path(artifact.location).read_text(
+                errors="replace")
     lines = text.splitlines()[-tail:]
     return PlainTextResponse("\n".join(lines) + ("\n" if lines else ""),
                              headers={"X-Content-Type-Options": "nosniff"})

@@ -13,8 +13,9 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
 from server.app import create_app
-from server.models import AreaRow
+from server.models import AreaRow, RunResult
 from server.settings import Settings
+from worker.runner import execute_run
 
 
 @pytest.fixture(autouse=True)
@@ -90,3 +91,23 @@ def test_upload_size_limit(settings: Settings, sessions: sessionmaker[Session],
         response = _upload(client, tokens.auth("alice"), _room_obj() * 10)
     assert response.status_code == 413 and "too large" in response.json()["detail"]
     assert _areas(sessions) == 0
+
+
+def test_an_upload_is_kept_and_flown_from_the_settings_folder(
+    client: TestClient, tokens: Any, settings: Settings, sessions: sessionmaker[Session],
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The route and the worker use `Settings.areas_dir`, not the areas library's default."""
+    monkeypatch.setenv("FLYBO_DATA_DIR", str(tmp_path / "elsewhere"))
+    assert _upload(client, tokens.auth("alice"), _room_obj()).status_code == 201
+    saved = settings.areas_dir / "my-room.npz"
+    assert saved.is_file() and not (tmp_path / "elsewhere").exists()
+    saved.unlink()  # as on a worker's machine that never saw it: fetched from the store
+    job = client.post("/api/v1/jobs", headers=tokens.auth("alice"), json={
+        "planner": "classic", "areas": ["my-room"], "runs": 1, "seconds": 4}).json()
+    run_id = job["runs"][0]["id"]
+    assert execute_run(run_id, settings) in {"succeeded", "failed"}
+    assert saved.is_file() and not (tmp_path / "elsewhere").exists()
+    with sessions() as s:
+        result = s.get(RunResult, run_id)
+        assert result is not None and result.simulated_until_s > 0

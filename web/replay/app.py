@@ -19,7 +19,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from server.db import make_engine, make_session_factory
 from server.settings import Settings
-from server.storage import ArtifactStore, open_store
+from server.storage import ArtifactStore, settings_store
 from web.replay.cache import RunCache
 from web.replay.session import ClientSession
 from web.replay.source import (
@@ -101,9 +101,7 @@ class ReplayApp:
         with self._lock:
             if self._db is None:
                 sessions = make_session_factory(make_engine(self.settings.db_url))
-                store = open_store(self.settings.artifacts,
-                                   endpoint_url=self.settings.s3_endpoint_url,
-                                   cache_dir=self.settings.resolved_data_dir / "artifact-cache")
+                store = settings_store(self.settings)
                 self._db = (sessions, store)
             return self._db
 
