@@ -1,9 +1,12 @@
 """How the planner process is isolated: namespaces (bubblewrap), cgroups and resource limits.
 
-- **Filesystem**: a new root holding only the system libraries, the Python installation, the
-  project's simulation and planner packages (read-only), the planner's code (read-only), the
-  map file (read-only) and an empty working folder. Ground truth, database, broker files,
-  artifacts and other submissions are not in it.
+- **Filesystem**: a new root holding only the system libraries, the Python installation and
+  the libraries it imports, the project's simulation and planner packages (read-only), the
+  planner's code (read-only), the map file (read-only) and an empty working folder. Ground
+  truth, database, broker files, artifacts and other submissions are not in it, nor the
+  service's own packages (`server`, `web`, `flybo`), where an installed flybo has them in the
+  Python installation's site-packages. The packages are found where Python imports them from:
+  a source tree, an editable install or an installed wheel alike.
 - **Namespaces**: no network (a new, empty network namespace), own PID, IPC and UTS namespaces,
   an empty environment, a new session; the process dies with the worker.
 - **Limits**: processes (cgroup `pids.max`), memory (cgroup memory limit), CPU seconds, open
@@ -16,9 +19,11 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import importlib.util
 import os
 import resource
 import shutil
+import site
 import subprocess
 import sys
 import uuid
@@ -29,9 +34,9 @@ from pathlib import Path
 
 from pydantic import BaseModel, Field
 
-PROJECT_ROOT = Path(__file__).resolve().parents[2]
 # The packages the planner process imports; nothing else of the project is visible to it.
 VISIBLE_PACKAGES = ("sim", "planners", "areas", "worker")
+HIDDEN_PACKAGES = ("flybo", "server", "web")
 CGROUP_V1 = Path("/sys/fs/cgroup")
 
 
@@ -186,6 +191,66 @@ def preexec(limits: SandboxLimits, cgroups: Cgroups, iso: Isolation) -> Callable
     return apply
 
 
+def _package_dir(name: str) -> Path | None:
+    """The folder of top-level package `name` as Python would import it (not importing it)."""
+    try:
+        spec = importlib.util.find_spec(name)
+    except (ImportError, ValueError):
+        return None
+    if spec is None:
+        return None
+    if spec.submodule_search_locations:
+        return Path(next(iter(spec.submodule_search_locations))).resolve()
+    return Path(spec.origin).resolve().parent if spec.origin else None
+
+
+@lru_cache(maxsize=1)
+def package_dirs() -> dict[str, Path]:
+    """The folders of the packages the planner process sees: in the source tree, or in
+    site-packages once flybo is installed."""
+    found = {name: _package_dir(name) for name in VISIBLE_PACKAGES}
+    missing = [name for name, path in found.items() if path is None]
+    if missing:
+        raise RuntimeError(f"cannot find the package(s) {', '.join(missing)}")
+    return {name: path for name, path in found.items() if path is not None}
+
+
+def python_path() -> str:
+    """`PYTHONPATH` of the planner process: the folders holding the visible packages."""
+    roots = dict.fromkeys(str(path.parent) for path in package_dirs().values())
+    return os.pathsep.join(roots)
+
+
+def _prefixes() -> list[str]:
+    return sorted({sys.base_prefix, sys.prefix})
+
+
+def library_dirs() -> list[str]:
+    """Site-packages folders on `sys.path` outside the Python installation (added by a `.pth`
+    file or `PYTHONPATH`): the planner process needs the libraries found there too. The user's
+    own site-packages is left out; the planner process runs without it (`python -s`)."""
+    user_site = site.getusersitepackages() if site.ENABLE_USER_SITE else None
+    found: list[str] = []
+    for entry in sys.path:
+        path = Path(entry or ".").resolve()
+        if (path.name not in ("site-packages", "dist-packages") or not path.is_dir()
+                or str(path) == user_site or str(path) in found):
+            continue
+        if not any(path.is_relative_to(prefix) for prefix in _prefixes()):
+            found.append(str(path))
+    return found
+
+
+def _hidden_dirs(bound: list[str]) -> list[str]:
+    """The service's own packages where a bound folder would show them (an installed flybo)."""
+    hidden = []
+    for name in HIDDEN_PACKAGES:
+        path = _package_dir(name)
+        if path is not None and any(path.is_relative_to(root) for root in bound):
+            hidden.append(str(path))
+    return hidden
+
+
 def command(iso: Isolation, *, work: Path, code: Path | None, map_dir: Path,
             child_args: list[str]) -> list[str]:
     """The command line that starts the planner process."""
@@ -201,16 +266,18 @@ def command(iso: Isolation, *, work: Path, code: Path | None, map_dir: Path,
             args += ["--symlink", os.readlink(target), str(target)]
         elif target.is_dir():
             args += ["--ro-bind", str(target), str(target)]
-    for prefix in {sys.base_prefix, sys.prefix}:
-        args += ["--ro-bind", prefix, prefix]
-    for package in VISIBLE_PACKAGES:
-        path = PROJECT_ROOT / package
+    libraries = [*_prefixes(), *library_dirs()]
+    for folder in libraries:
+        args += ["--ro-bind", folder, folder]
+    for folder in _hidden_dirs(libraries):
+        args += ["--tmpfs", folder]
+    for path in package_dirs().values():
         args += ["--ro-bind", str(path), str(path)]
     args += ["--bind", str(work), "/sandbox/work", "--ro-bind", str(map_dir), "/sandbox/map"]
     if code is not None:
         args += ["--ro-bind", str(code), "/sandbox/code"]
     args += ["--chdir", "/sandbox/work", "--clearenv", "--setenv", "HOME", "/sandbox/work",
-             "--setenv", "PYTHONPATH", str(PROJECT_ROOT), "--setenv", "OMP_NUM_THREADS", "1",
+             "--setenv", "PYTHONPATH", python_path(), "--setenv", "OMP_NUM_THREADS", "1",
              "--setenv", "NUMBA_NUM_THREADS", "1", "--setenv", "OPENBLAS_NUM_THREADS", "1",
              "--setenv", "NUMBA_CACHE_DIR", "/sandbox/work/.numba-cache", "--", *python]
     return args
@@ -224,8 +291,8 @@ def seed_numba_cache(work: Path) -> Path:
     first planning call. Returns the folder to pass as `NUMBA_CACHE_DIR`.
     """
     cache = work / ".numba-cache"
-    for package in VISIBLE_PACKAGES:
-        for pycache in (PROJECT_ROOT / package).rglob("__pycache__"):
+    for package_dir in package_dirs().values():
+        for pycache in package_dir.rglob("__pycache__"):
             kernels = list(pycache.glob("*.nb[ic]"))
             if not kernels:
                 continue

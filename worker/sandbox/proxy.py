@@ -156,7 +156,7 @@ class SandboxedPlanner:
         numba_cache = isolation.seed_numba_cache(self.work)
         self.cgroups = isolation.make_cgroups(self.iso, self.limits)
         env = {"PATH": "/usr/bin:/bin", "HOME": str(self.work),
-               "PYTHONPATH": str(isolation.PROJECT_ROOT), "OMP_NUM_THREADS": "1",
+               "PYTHONPATH": isolation.python_path(), "OMP_NUM_THREADS": "1",
                "NUMBA_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
                "NUMBA_CACHE_DIR": str(numba_cache)}
         with self.stderr_path.open("wb") as err:
