@@ -120,11 +120,6 @@ class TraversabilityTracker:
         return self._radius_m
 
     @property
-    def margin_voxels(self) -> int:
-        """How far, in voxels, one state change can affect traversability."""
-        return self._margin
-
-    @property
     def traversable(self) -> BoolGrid:
         """(nx, ny, nz) bool, a read-only view as of the last update."""
         view = self._traversable.view()

@@ -26,10 +26,6 @@ class Pose:
     position: FloatArray
     yaw: float
 
-    def as_array(self) -> FloatArray:
-        """(4,) x, y, z, yaw."""
-        return np.array([*self.position, self.yaw], dtype=np.float64)
-
 
 def yaw_matrix(yaw: float) -> FloatArray:
     """(3, 3) rotation about +z taking body vectors to world vectors."""

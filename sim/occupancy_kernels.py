@@ -1,0 +1,284 @@
+"""The occupancy map's numba kernels: 3D-DDA traversal of depth rays and the log-odds update
+(see `sim.occupancy` for the model and `sim.voxel_grid` for the grid convention)."""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+import numpy.typing as npt
+
+from sim.geometry import FloatArray
+from sim.voxel_grid import (
+    _FREE,
+    _OCCUPIED,
+    _UNKNOWN,
+    BoolArray,
+    IndexArray,
+    LogOddsGrid,
+    StateGrid,
+)
+
+
+@numba.njit(cache=True)
+def _floor_in(x: float, n: int) -> int:
+    """floor(x) clamped to [0, n - 1]."""
+    return min(max(math.floor(x), 0), n - 1)
+
+
+@numba.njit(cache=True)
+def _axis_start(a: float, d: float, i: int) -> tuple[int, float, float]:
+    """Step sign, t of the first face crossing out of voxel i, t between crossings."""
+    if d > 0.0:
+        return 1, (i + 1 - a) / d, 1.0 / d
+    if d < 0.0:
+        return -1, (i - a) / d, -1.0 / d
+    return 0, math.inf, math.inf
+
+
+@numba.njit(cache=True)
+def _traverse(
+    ax: float, ay: float, az: float, bx: float, by: float, bz: float,
+    nx: int, ny: int, nz: int, buf: IndexArray,
+) -> tuple[int, bool, int, int, int, int, int, int]:
+    """3D-DDA (Amanatides & Woo) of the segment a→b clipped to the grid box.
+
+    a, b: segment ends in grid units, (world - grid origin) / voxel_size; voxel (i, j, k) spans
+        [i, i+1) x [j, j+1) x [k, k+1) and the box is [0, nx) x [0, ny) x [0, nz).
+    buf: (M,) int64 with M >= nx + ny + nz; receives the flat C-order indices of the in-grid
+        voxels the segment visits, in order. When b lies in the grid the last one is floor(b).
+
+    Returns:
+        count written, whether the last voxel written is b's voxel, then the i, j, k of the
+        first and of the last voxel written (meaningless when count is 0).
+    """
+    dx = bx - ax
+    dy = by - ay
+    dz = bz - az
+    ex = math.floor(bx)
+    ey = math.floor(by)
+    ez = math.floor(bz)
+    end_in = 0 <= ex < nx and 0 <= ey < ny and 0 <= ez < nz
+    end_flat = (ex * ny + ey) * nz + ez
+    # Slab clipping to the grid box; t runs from 0 at a to 1 at b.
+    t0 = 0.0
+    t1 = 1.0
+    if dx != 0.0:
+        ta = -ax / dx
+        tb = (nx - ax) / dx
+        t0 = max(t0, min(ta, tb))
+        t1 = min(t1, max(ta, tb))
+    elif ax < 0.0 or ax >= nx:
+        return 0, False, 0, 0, 0, 0, 0, 0
+    if dy != 0.0:
+        ta = -ay / dy
+        tb = (ny - ay) / dy
+        t0 = max(t0, min(ta, tb))
+        t1 = min(t1, max(ta, tb))
+    elif ay < 0.0 or ay >= ny:
+        return 0, False, 0, 0, 0, 0, 0, 0
+    if dz != 0.0:
+        ta = -az / dz
+        tb = (nz - az) / dz
+        t0 = max(t0, min(ta, tb))
+        t1 = min(t1, max(ta, tb))
+    elif az < 0.0 or az >= nz:
+        return 0, False, 0, 0, 0, 0, 0, 0
+    if not t0 < t1:
+        # At most a single point of the segment touches the box.
+        if end_in:
+            buf[0] = end_flat
+            return 1, True, ex, ey, ez, ex, ey, ez
+        return 0, False, 0, 0, 0, 0, 0, 0
+
+    # First and last voxels; clamping absorbs rounding of points computed on the box faces.
+    ix = _floor_in(ax + t0 * dx, nx)
+    iy = _floor_in(ay + t0 * dy, ny)
+    iz = _floor_in(az + t0 * dz, nz)
+    if end_in:
+        lx, ly, lz = ex, ey, ez
+    else:
+        lx = _floor_in(ax + t1 * dx, nx)
+        ly = _floor_in(ay + t1 * dy, ny)
+        lz = _floor_in(az + t1 * dz, nz)
+    sx, tmx, tdx = _axis_start(ax, dx, ix)
+    sy, tmy, tdy = _axis_start(ay, dy, iy)
+    sz, tmz, tdz = _axis_start(az, dz, iz)
+    # Face crossings left per axis. Counting them, rather than testing t against t1, keeps the
+    # walk inside the grid and makes it end on the last voxel whatever the rounding.
+    cx = (lx - ix) * sx
+    cy = (ly - iy) * sy
+    cz = (lz - iz) * sz
+    if cx < 0 or cy < 0 or cz < 0:
+        # Only when rounding puts the entry past the end (segment shorter than rounding).
+        if end_in:
+            buf[0] = end_flat
+            return 1, True, ex, ey, ez, ex, ey, ez
+        return 0, False, 0, 0, 0, 0, 0, 0
+    if cx == 0:
+        tmx = math.inf
+    if cy == 0:
+        tmy = math.inf
+    if cz == 0:
+        tmz = math.inf
+    stx = sx * ny * nz
+    sty = sy * nz
+    idx = (ix * ny + iy) * nz + iz
+    n = cx + cy + cz
+    buf[0] = idx
+    for s in range(1, n + 1):
+        if tmx <= tmy and tmx <= tmz:
+            idx += stx
+            cx -= 1
+            tmx = math.inf if cx == 0 else tmx + tdx
+        elif tmy <= tmz:
+            idx += sty
+            cy -= 1
+            tmy = math.inf if cy == 0 else tmy + tdy
+        else:
+            idx += sz
+            cz -= 1
+            tmz = math.inf if cz == 0 else tmz + tdz
+        buf[s] = idx
+    return n + 1, end_in, ix, iy, iz, lx, ly, lz
+
+
+@numba.njit(cache=True, inline="always")
+def _grow_box(box: IndexArray, i: int, j: int, k: int) -> None:
+    """Grow the inclusive (6,) min i, j, k / max i, j, k box over voxel (i, j, k)."""
+    box[0] = min(box[0], i)
+    box[1] = min(box[1], j)
+    box[2] = min(box[2], k)
+    box[3] = max(box[3], i)
+    box[4] = max(box[4], j)
+    box[5] = max(box[5], k)
+
+
+@numba.njit(cache=True, inline="always")
+def _unflatten(v: int, ny: int, nz: int) -> tuple[int, int, int]:
+    """(i, j, k) of the flat C-order index v in a (nx, ny, nz) grid."""
+    q = v // nz
+    i = q // ny
+    return i, q - i * ny, v - q * nz
+
+
+@numba.njit(cache=True)
+def integrate_rays(
+    origin: FloatArray, endpoints: FloatArray, hit: BoolArray,
+    grid_origin: FloatArray, voxel_size: float,
+    log_odds: LogOddsGrid, state: StateGrid,
+    l_hit: float, l_miss: float, l_min: float, l_max: float, threshold: float,
+    touched: IndexArray, changed: IndexArray,
+    stamp: npt.NDArray[np.int64], batch: int,
+) -> int:
+    """Update the grid with a batch of rays sharing one origin (one depth frame).
+
+    Each voxel is updated at most once per batch, and hits win (as OctoMap does): a voxel in
+    which any ray ends on a surface gets `l_hit`; every other in-grid voxel that some ray passes
+    through, or ends in without a return, gets `l_miss`. Without this, the many grazing rays of
+    one frame that pass through a wall's surface voxel would outvote the rays that hit it and
+    carve holes in walls. Log-odds are clamped to [l_min, l_max]. Rays with a non-finite
+    endpoint are skipped; parts of rays outside the grid are skipped; the origin may lie outside.
+
+    `stamp` (nx*ny*nz,) int64 holds, per voxel, the last batch tag that touched it; `batch` must
+    grow from call to call (tags 3*batch: hit pending, 3*batch+1: miss applied, 3*batch+2: hit
+    applied).
+
+    Args:
+        origin: (3,) float64 sensor position, world metres.
+        endpoints: (N, 3) float64 ray ends, world metres.
+        hit: (N,) bool, True where the ray ends on a surface.
+        grid_origin: (3,) float64 lower corner of voxel (0, 0, 0).
+        log_odds: (nx, ny, nz) float32 C-contiguous, updated in place.
+        state: (nx, ny, nz) uint8 C-contiguous `VoxelState`, updated in place.
+        touched: (6,) int64 min i, j, k then max i, j, k of all updated voxels, grown in place.
+        changed: (6,) int64 the same for voxels whose state changed, grown in place.
+
+    Returns:
+        Number of voxels that went from UNKNOWN to known.
+    """
+    nx, ny, nz = log_odds.shape
+    flat_l = log_odds.reshape(-1)
+    flat_s = state.reshape(-1)
+    buf = np.empty(nx + ny + nz + 3, dtype=np.int64)
+    ax = (origin[0] - grid_origin[0]) / voxel_size
+    ay = (origin[1] - grid_origin[1]) / voxel_size
+    az = (origin[2] - grid_origin[2]) / voxel_size
+    if not (math.isfinite(ax) and math.isfinite(ay) and math.isfinite(az)):
+        return 0
+    newly = 0
+    hit_tag = 3 * batch
+    miss_tag = 3 * batch + 1
+    done_tag = 3 * batch + 2
+    # First pass: the voxels where rays end on a surface, so that the second pass skips them.
+    for r in range(endpoints.shape[0]):
+        if not hit[r]:
+            continue
+        bx = (endpoints[r, 0] - grid_origin[0]) / voxel_size
+        by = (endpoints[r, 1] - grid_origin[1]) / voxel_size
+        bz = (endpoints[r, 2] - grid_origin[2]) / voxel_size
+        if not (math.isfinite(bx) and math.isfinite(by) and math.isfinite(bz)):
+            continue
+        # The walk of a ray ending in the grid ends in floor(b) (see `_traverse`).
+        ex = math.floor(bx)
+        ey = math.floor(by)
+        ez = math.floor(bz)
+        if 0 <= ex < nx and 0 <= ey < ny and 0 <= ez < nz:
+            stamp[(ex * ny + ey) * nz + ez] = hit_tag
+    for r in range(endpoints.shape[0]):
+        bx = (endpoints[r, 0] - grid_origin[0]) / voxel_size
+        by = (endpoints[r, 1] - grid_origin[1]) / voxel_size
+        bz = (endpoints[r, 2] - grid_origin[2]) / voxel_size
+        if not (math.isfinite(bx) and math.isfinite(by) and math.isfinite(bz)):
+            continue
+        count, _, fi, fj, fk, li, lj, lk = _traverse(ax, ay, az, bx, by, bz, nx, ny, nz, buf)
+        if count == 0:
+            continue
+        first_change = -1
+        last_change = -1
+        # Inline rather than a per-voxel function call: this loop is the hot path.
+        for c in range(count):
+            v = buf[c]
+            tag = stamp[v]
+            if tag in (miss_tag, done_tag):
+                continue
+            if tag == hit_tag:
+                delta = l_hit
+                stamp[v] = done_tag
+            else:
+                delta = l_miss
+                stamp[v] = miss_tag
+            new = np.float32(min(max(flat_l[v] + delta, l_min), l_max))
+            flat_l[v] = new
+            # The state follows the stored float32, so state == (log_odds > threshold).
+            s_new = _OCCUPIED if new > threshold else _FREE
+            s_old = flat_s[v]
+            if s_new != s_old:
+                flat_s[v] = s_new
+                if s_old == _UNKNOWN:
+                    newly += 1
+                if first_change < 0:
+                    first_change = c
+                last_change = c
+        # A DDA path is monotone on every axis, so the first and last of any of its voxels
+        # bound all of them.
+        _grow_box(touched, fi, fj, fk)
+        _grow_box(touched, li, lj, lk)
+        if first_change >= 0:
+            i, j, k = _unflatten(buf[first_change], ny, nz)
+            _grow_box(changed, i, j, k)
+            i, j, k = _unflatten(buf[last_change], ny, nz)
+            _grow_box(changed, i, j, k)
+    return newly
+
+
+@numba.njit(cache=True)
+def _ray_voxels(a: FloatArray, b: FloatArray, nx: int, ny: int, nz: int) -> IndexArray:
+    """(K, 3) int64 voxels segment a→b (grid units) visits in the grid, in order."""
+    buf = np.empty(nx + ny + nz + 3, dtype=np.int64)
+    count = _traverse(a[0], a[1], a[2], b[0], b[1], b[2], nx, ny, nz, buf)[0]
+    out = np.empty((count, 3), dtype=np.int64)
+    for c in range(count):
+        out[c, 0], out[c, 1], out[c, 2] = _unflatten(buf[c], ny, nz)
+    return out
