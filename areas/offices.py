@@ -181,83 +181,113 @@ def _room_furniture(p: Parts, cfg: OfficesConfig, room: Rect, z: float, keep_out
             _plant(p, corner[0], corner[1], z, seg)
 
 
-def build_offices(cfg: OfficesConfig, seed: int = 0) -> Area:
-    """An office building per ``cfg``; the same seed gives identical arrays."""
-    rng = np.random.default_rng(seed)
+def _door_spots(bands: tuple[Band, Band], x_size: float) -> list[float]:
+    """Door positions along x in the wall between two bands: in front of each room of both
+    bands (two in a room 10 m wide or more), at least 2 m apart."""
+    doors: list[float] = []
+    for bb in bands:
+        if bb.corridor:
+            continue
+        bxs = np.linspace(0.0, x_size, bb.rooms + 1)
+        for r0, r1 in itertools.pairwise(bxs):
+            w = r1 - r0
+            spots = [(r0 + r1) / 2.0] if w < 10 else [r0 + w / 4, r1 - w / 4]
+            doors += [s for s in spots if all(abs(s - d) > 2.0 for d in doors)]
+    return doors
+
+
+def _band_walls(p: Parts, cfg: OfficesConfig, bands: tuple[Band, ...], floor: float, ceil: float,
+                keep_out: list[Rect]) -> list[tuple[Rect, list[float]]]:
+    """The inner walls of one storey, with their doors (kept free in ``keep_out``); returns
+    each room's interior rectangle with the y of its walls that may carry shelves."""
+    X, Y, _ = cfg.size
+    edges = _band_edges(bands, Y)
+    door_h = min(DOOR_H, ceil - floor - 0.3)
+    room_rects: list[tuple[Rect, list[float]]] = []
+    for b, band in enumerate(bands):
+        ya, yb = edges[b], edges[b + 1]
+        xs = np.linspace(0.0, X, band.rooms + 1)
+        # Partition walls between the rooms of the band, each with a door at mid-depth.
+        if not band.corridor:
+            for xw in xs[1:-1]:
+                yd = (ya + yb) / 2.0
+                p.add(wall(1, ya, yb, float(xw), INNER, floor, ceil,
+                           [(yd - DOOR_W / 2, floor, yd + DOOR_W / 2, floor + door_h)]))
+                keep_out.append((xw - 1.0, yd - 1.0, xw + 1.0, yd + 1.0))
+        # The wall to the next band: a door in front of each room of both bands.
+        if b + 1 < len(bands):
+            doors = _door_spots((band, bands[b + 1]), X)
+            p.add(wall(0, 0.0, X, yb, INNER, floor, ceil,
+                       [(d - DOOR_W / 2, floor, d + DOOR_W / 2, floor + door_h)
+                        for d in doors]))
+            keep_out += [(d - 1.0, yb - 1.0, d + 1.0, yb + 1.0) for d in doors]
+        if band.corridor:
+            continue
+        for r0, r1 in itertools.pairwise(xs):
+            inner = (max(r0, OUTER) + INNER / 2, max(ya, OUTER) + INNER / 2,
+                     min(r1, X - OUTER) - INNER / 2, min(yb, Y - OUTER) - INNER / 2)
+            # Shelves go only against exterior walls, which have no doors.
+            outer_walls = [inner[1]] if ya < 1e-9 else []
+            outer_walls += [inner[3]] if yb > Y - 1e-9 else []
+            room_rects.append((inner, outer_walls))
+    return room_rects
+
+
+def _shell(p: Parts, cfg: OfficesConfig, storey: float, holes: list[Rect]) -> None:
+    """Ground slab, roof slab, the slabs between storeys (holed by the stairwell) and the
+    exterior walls over the full height."""
     X, Y, Z = cfg.size
-    n_levels = len(cfg.levels)
-    storey = Z / n_levels
-    p = Parts()
-    # Ground slab, roof slab and the slabs between storeys (holed by the stairwell).
     p.add(slab((0.0, 0.0, X, Y), 0.0, 0.15), slab((0.0, 0.0, X, Y), Z - 0.15, Z))
-    holes = [cfg.stairwell] if cfg.stairwell else []
-    for lvl in range(1, n_levels):
+    for lvl in range(1, len(cfg.levels)):
         p.add(slab((0.0, 0.0, X, Y), lvl * storey - SLAB / 2, lvl * storey + SLAB / 2, holes))
-    # Exterior walls over the full height.
     for axis, at in ((0, OUTER / 2), (0, Y - OUTER / 2), (1, OUTER / 2), (1, X - OUTER / 2)):
         p.add(wall(axis, 0.0, X if axis == 0 else Y, at, OUTER, 0.0, Z))
 
-    for lvl, bands in enumerate(cfg.levels):
-        floor = 0.15 if lvl == 0 else lvl * storey + SLAB / 2
-        ceil = Z - 0.15 if lvl == n_levels - 1 else (lvl + 1) * storey - SLAB / 2
-        edges = _band_edges(bands, Y)
-        door_h = min(DOOR_H, ceil - floor - 0.3)
-        keep_out: list[Rect] = []
-        if cfg.stairwell:
-            sx0, sy0, sx1, sy1 = cfg.stairwell
-            keep_out.append((sx0 - 0.5, sy0 - 0.5, sx1 + 0.5, sy1 + 1.5))
-        room_rects: list[tuple[Rect, list[float]]] = []
-        for b, band in enumerate(bands):
-            ya, yb = edges[b], edges[b + 1]
-            xs = np.linspace(0.0, X, band.rooms + 1)
-            # Partition walls between the rooms of the band, each with a door at mid-depth.
-            if not band.corridor:
-                for xw in xs[1:-1]:
-                    yd = (ya + yb) / 2.0
-                    p.add(wall(1, ya, yb, float(xw), INNER, floor, ceil,
-                               [(yd - DOOR_W / 2, floor, yd + DOOR_W / 2, floor + door_h)]))
-                    keep_out.append((xw - 1.0, yd - 1.0, xw + 1.0, yd + 1.0))
-            # The wall to the next band: a door in front of each room of both bands.
-            if b + 1 < len(bands):
-                doors: list[float] = []
-                for bb in (band, bands[b + 1]):
-                    if bb.corridor:
-                        continue
-                    bxs = np.linspace(0.0, X, bb.rooms + 1)
-                    for r0, r1 in itertools.pairwise(bxs):
-                        w = r1 - r0
-                        spots = [(r0 + r1) / 2.0] if w < 10 else [r0 + w / 4, r1 - w / 4]
-                        doors += [s for s in spots if all(abs(s - d) > 2.0 for d in doors)]
-                p.add(wall(0, 0.0, X, yb, INNER, floor, ceil,
-                           [(d - DOOR_W / 2, floor, d + DOOR_W / 2, floor + door_h)
-                            for d in doors]))
-                keep_out += [(d - 1.0, yb - 1.0, d + 1.0, yb + 1.0) for d in doors]
-            if band.corridor:
-                continue
-            for r0, r1 in itertools.pairwise(xs):
-                inner = (max(r0, OUTER) + INNER / 2, max(ya, OUTER) + INNER / 2,
-                         min(r1, X - OUTER) - INNER / 2, min(yb, Y - OUTER) - INNER / 2)
-                # Shelves go only against exterior walls, which have no doors.
-                outer_walls = [inner[1]] if ya < 1e-9 else []
-                outer_walls += [inner[3]] if yb > Y - 1e-9 else []
-                room_rects.append((inner, outer_walls))
-        for inner, walls_ in room_rects:
-            _room_furniture(p, cfg, inner, floor, keep_out, walls_, rng)
-        # Ceiling lights on a 2.4 m grid.
-        for lx in np.arange(1.6, X - 1.0, 2.4):
-            for ly in np.arange(1.6, Y - 1.0, 2.4):
-                if not _overlaps((lx - 0.6, ly - 0.15, lx + 0.6, ly + 0.15), holes):
-                    p.box((lx - 0.6, ly - 0.15, ceil - 0.06), (lx + 0.6, ly + 0.15, ceil))
-        if cfg.stairwell and lvl + 1 < n_levels:
-            sx0, sy0, sx1, sy1 = cfg.stairwell
-            top = (lvl + 1) * storey + SLAB / 2
-            length = sy1 - sy0 - 0.2
-            n_steps = max(2, round((top - floor) / 0.18))
-            p.add(stairs((sx0 + 0.05 + STAIR_W / 2, sy0 + 0.1, floor), 1, 1.0, STAIR_W,
-                         top - floor, run=length / n_steps))
-            # A railing along the open side of the hole on the storey above.
-            p.add(railing([(sx1 + 0.05, sy0, top), (sx1 + 0.05, sy1, top)]))
 
+def _stair_flight(p: Parts, stairwell: Rect, floor: float, top: float) -> None:
+    """The flight from ``floor`` up through the stairwell to ``top``, and a railing along the
+    open side of the hole on the storey above."""
+    sx0, sy0, sx1, sy1 = stairwell
+    length = sy1 - sy0 - 0.2
+    n_steps = max(2, round((top - floor) / 0.18))
+    p.add(stairs((sx0 + 0.05 + STAIR_W / 2, sy0 + 0.1, floor), 1, 1.0, STAIR_W,
+                 top - floor, run=length / n_steps))
+    p.add(railing([(sx1 + 0.05, sy0, top), (sx1 + 0.05, sy1, top)]))
+
+
+def _storey(p: Parts, cfg: OfficesConfig, lvl: int, storey: float, holes: list[Rect],
+            rng: np.random.Generator) -> None:
+    """Storey ``lvl``: its inner walls, furniture, ceiling lights and the flight up from it."""
+    X, Y, Z = cfg.size
+    n_levels = len(cfg.levels)
+    floor = 0.15 if lvl == 0 else lvl * storey + SLAB / 2
+    ceil = Z - 0.15 if lvl == n_levels - 1 else (lvl + 1) * storey - SLAB / 2
+    keep_out: list[Rect] = []
+    if cfg.stairwell:
+        sx0, sy0, sx1, sy1 = cfg.stairwell
+        keep_out.append((sx0 - 0.5, sy0 - 0.5, sx1 + 0.5, sy1 + 1.5))
+    room_rects = _band_walls(p, cfg, cfg.levels[lvl], floor, ceil, keep_out)
+    for inner, walls_ in room_rects:
+        _room_furniture(p, cfg, inner, floor, keep_out, walls_, rng)
+    # Ceiling lights on a 2.4 m grid.
+    for lx in np.arange(1.6, X - 1.0, 2.4):
+        for ly in np.arange(1.6, Y - 1.0, 2.4):
+            if not _overlaps((lx - 0.6, ly - 0.15, lx + 0.6, ly + 0.15), holes):
+                p.box((lx - 0.6, ly - 0.15, ceil - 0.06), (lx + 0.6, ly + 0.15, ceil))
+    if cfg.stairwell and lvl + 1 < n_levels:
+        _stair_flight(p, cfg.stairwell, floor, (lvl + 1) * storey + SLAB / 2)
+
+
+def build_offices(cfg: OfficesConfig, seed: int = 0) -> Area:
+    """An office building per ``cfg``; the same seed gives identical arrays."""
+    rng = np.random.default_rng(seed)
+    n_levels = len(cfg.levels)
+    storey = cfg.size[2] / n_levels
+    p = Parts()
+    holes = [cfg.stairwell] if cfg.stairwell else []
+    _shell(p, cfg, storey, holes)
+    for lvl in range(n_levels):
+        _storey(p, cfg, lvl, storey, holes, rng)
     start_x, start_y = cfg.start
     return finish_area(
         name=cfg.name, mesh=p.build(), bounds_min=np.zeros(3), bounds_max=np.array(cfg.size),
