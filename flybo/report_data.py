@@ -1,0 +1,51 @@
+"""The data of `flybo report`, read from a service's API (`/areas`, `/leaderboard`, `/curves`)
+through any `httpx.Client`, a test's `TestClient` included."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import httpx
+
+from server.schemas import AreaOut, Curves, Leaderboard
+
+CURVE_POINTS = 1000  # per curve: plenty for a printed figure, small to fetch
+
+
+class ReportError(RuntimeError):
+    """The service could not be read."""
+
+
+@dataclass(frozen=True)
+class ReportData:
+    """What the report is made of: the leaderboard of one preset, the curves of each area
+    that has results, and every area's statistics."""
+
+    preset: str
+    board: Leaderboard
+    areas: list[AreaOut]
+    curves: dict[str, Curves] = field(default_factory=dict)
+    source: str = ""
+
+
+def _get(client: httpx.Client, path: str, params: dict[str, Any] | None = None) -> Any:
+    try:
+        response = client.get(path, params=params)
+    except httpx.HTTPError as exc:
+        raise ReportError(f"cannot reach the service: {exc}") from None
+    if response.status_code != 200:
+        raise ReportError(f"GET {path} answered {response.status_code}: {response.text[:200]}")
+    return response.json()
+
+
+def fetch_report_data(client: httpx.Client, preset: str = "default") -> ReportData:
+    """Everything the report needs, from the API under `/api/v1` of `client`'s base URL."""
+    board = Leaderboard.model_validate(_get(client, "/api/v1/leaderboard", {"preset": preset}))
+    areas = [AreaOut.model_validate(a) for a in _get(client, "/api/v1/areas")]
+    curves = {
+        area: Curves.model_validate(_get(client, "/api/v1/curves", {
+            "area": area, "preset": preset, "max_points": CURVE_POINTS}))
+        for area in board.areas}
+    return ReportData(preset=preset, board=board, areas=areas, curves=curves,
+                      source=str(client.base_url))
