@@ -47,264 +47,55 @@ longer matches it:
 
 ``python -m flybo.versions`` prints the tree's versions, ``--check`` exits 1 listing every
 mismatch, ``--write`` updates the lock and prints what changed.
+
+The hashes are computed in `flybo.fingerprints`, from the sources that `flybo.module_sources`
+finds and reads; this module re-exports them and keeps the lock.
 """
 
 from __future__ import annotations
 
 import argparse
-import ast
-import dataclasses
 import datetime
-import enum
-import functools
-import hashlib
-import importlib.util
 import json
 import re
 import sys
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from flybo.fingerprints import (
+    COMPONENTS,
+    component_hashes,
+    fingerprint_of_class,
+    planner_fingerprint,
+    planner_fingerprints,
+    sha256_of,
+)
+from flybo.module_sources import package_sources, read_source
+
+__all__ = [
+    "COMPONENTS",
+    "LOCK_PATH",
+    "WRITE_COMMAND",
+    "benchmark_version",
+    "check_lock",
+    "component_hashes",
+    "current_lock",
+    "fingerprint_of_class",
+    "load_lock",
+    "main",
+    "next_version",
+    "package_sources",
+    "planner_fingerprint",
+    "planner_fingerprints",
+    "read_source",
+    "write_lock",
+]
+
 LOCK_PATH = Path(__file__).with_name("benchmark.lock.json")
-COMPONENTS = ("sim", "presets", "areas")
 WRITE_COMMAND = "python -m flybo.versions --write"
 
 _VERSION_NAME = re.compile(r"^(?P<year>\d{4})\.(?P<month>\d{2})-(?P<serial>\d+)$")
-# Planner dependencies outside these are not followed (see the module's docstring).
-_PLANNER_PACKAGES = ("planners",)
-_PLANNER_EXTRA_MODULES = ("sim.interface",)
-_NOT_FOLLOWED = ("planners.registry", "planners.builtin")
-
-
-# -- sources --------------------------------------------------------------------------------------
-
-
-def read_source(path: Path) -> str:
-    """The text of a source file: UTF-8, line endings normalised to ``\\n``."""
-    text = path.read_bytes().decode("utf-8")
-    return text.replace("\r\n", "\n").replace("\r", "\n")
-
-
-# Module-level so that tests can swap it: every source is read through `_read`.
-_read: Callable[[Path], str] = read_source
-
-
-def _canonical(value: Any) -> str:
-    return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=False,
-                      allow_nan=False)
-
-
-def _sha256(value: Any) -> str:
-    return hashlib.sha256(_canonical(value).encode("utf-8")).hexdigest()
-
-
-@functools.cache
-def _top_level_location(top: str) -> Path | None:
-    """The folder of package `top`, or the file of module `top`; None when it is not found."""
-    try:
-        found = importlib.util.find_spec(top)
-    except (ImportError, ValueError):
-        return None
-    if found is None:
-        return None
-    if found.submodule_search_locations:
-        return Path(next(iter(found.submodule_search_locations))).resolve()
-    return Path(found.origin).resolve() if found.origin else None
-
-
-def _module_file(module: str) -> Path | None:
-    """The source file of `module` (dotted name), without importing it; None when there is none.
-    """
-    top, _, rest = module.partition(".")
-    base = _top_level_location(top)
-    if base is None:
-        return None
-    if base.is_file():
-        return base if not rest and base.suffix == ".py" else None
-    folder = base.joinpath(*rest.split(".")) if rest else base
-    if rest and (candidate := folder.parent / f"{folder.name}.py").is_file():
-        return candidate
-    init = folder / "__init__.py"
-    return init if init.is_file() else None
-
-
-def _relative_name(module: str, path: Path) -> str:
-    """`path` relative to the folder holding `module`'s top-level package, with '/'."""
-    base = _top_level_location(module.partition(".")[0])
-    assert base is not None
-    return path.relative_to(base.parent).as_posix()
-
-
-@functools.lru_cache(maxsize=1024)
-def _imports(module: str, is_package: bool, source: str) -> frozenset[str]:
-    """Every module `source` (of `module`, a package's ``__init__`` if `is_package`) imports,
-    anywhere in the file."""
-    package = module if is_package else module.rpartition(".")[0]
-    found: set[str] = set()
-    for node in ast.walk(ast.parse(source, filename=module)):
-        if isinstance(node, ast.Import):
-            found.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                parts = package.split(".") if package else []
-                if node.level - 1 > len(parts):
-                    continue
-                parts = parts[: len(parts) - (node.level - 1)]
-                base = ".".join([*parts, *([node.module] if node.module else [])])
-            else:
-                base = node.module or ""
-            if not base:
-                continue
-            found.add(base)
-            # `from package import name` may import the submodule `package.name`.
-            found.update(f"{base}.{alias.name}" for alias in node.names if alias.name != "*")
-    return frozenset(found)
-
-
-def _closure(roots: Iterable[str], follow: Callable[[str], bool]) -> dict[str, tuple[str, str]]:
-    """{module: (relative path, source)} of `roots` and of every module they import
-    transitively for which `follow` is true and a source file exists."""
-    seen: dict[str, tuple[str, str]] = {}
-    pending = [m for m in roots if follow(m)]
-    while pending:
-        module = pending.pop()
-        if module in seen:
-            continue
-        path = _module_file(module)
-        if path is None or "__pycache__" in path.parts:
-            continue
-        source = _read(path)
-        seen[module] = (_relative_name(module, path), source)
-        imported = _imports(module, path.name == "__init__.py", source)
-        pending.extend(m for m in imported if follow(m) and m not in seen)
-    return seen
-
-
-def _sources(modules: dict[str, tuple[str, str]]) -> list[list[str]]:
-    return [[rel, text] for rel, text in sorted(modules.values())]
-
-
-def package_sources(package: str) -> list[list[str]]:
-    """[relative path, source] of every ``*.py`` file under `package`, sorted by path."""
-    base = _top_level_location(package)
-    if base is None or not base.is_dir():
-        raise RuntimeError(f"package {package!r} not found")
-    files = [p for p in base.rglob("*.py") if "__pycache__" not in p.relative_to(base).parts]
-    return sorted([p.relative_to(base.parent).as_posix(), _read(p)] for p in files)
-
-
-# -- components -----------------------------------------------------------------------------------
-
-
-def _to_json(value: Any) -> Any:
-    """A JSON-able description of a parameter value (dataclasses, tuples, enums, numpy)."""
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {"__type__": f"{type(value).__module__}.{type(value).__qualname__}",
-                **{f.name: _to_json(getattr(value, f.name)) for f in dataclasses.fields(value)}}
-    if isinstance(value, enum.Enum):
-        return _to_json(value.value)
-    if isinstance(value, dict):
-        return {str(k): _to_json(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_to_json(v) for v in value]
-    if hasattr(value, "tolist"):  # numpy arrays and scalars
-        return _to_json(value.tolist())
-    if isinstance(value, float) and value != value:
-        return "nan"
-    if isinstance(value, float) and value in (float("inf"), float("-inf")):
-        return str(value)
-    if value is None or isinstance(value, (bool, int, float, str)):
-        return value
-    if callable(value):
-        return _describe_callable(value)
-    raise TypeError(f"cannot describe {type(value).__name__} {value!r} for a version hash")
-
-
-def _describe_callable(fn: Any) -> Any:
-    if isinstance(fn, functools.partial):
-        return {"function": _describe_callable(fn.func), "args": _to_json(list(fn.args)),
-                "kwargs": _to_json(dict(fn.keywords))}
-    return f"{fn.__module__}.{fn.__qualname__}"
-
-
-def _sim_hash() -> str:
-    return _sha256(package_sources("sim"))
-
-
-def _presets_hash() -> str:
-    from sim.config import PRESETS
-
-    return _sha256({name: cfg.model_dump(mode="json") for name, cfg in PRESETS.items()})
-
-
-def _areas_hash() -> str:
-    import areas.registry as area_registry
-
-    modules = _closure(["areas.registry", "areas.ground_truth"],
-                       lambda m: m == "areas" or m.startswith("areas."))
-    generators = getattr(area_registry, "_GENERATORS", {})
-    builders = getattr(area_registry, "_builders", {})
-    scenes = {name: {"generator": _describe_callable(generators[name]),
-                     "builder": _describe_callable(builders[name]) if name in builders else None}
-              for name in sorted(generators)}
-    return _sha256({"sources": _sources(modules), "areas": scenes})
-
-
-_COMPONENT_HASHES: dict[str, Callable[[], str]] = {
-    "sim": _sim_hash, "presets": _presets_hash, "areas": _areas_hash,
-}
-
-
-def component_hashes() -> dict[str, str]:
-    """SHA-256 of each component of the benchmark in this tree: ``sim``, ``presets``, ``areas``.
-    """
-    return {name: _COMPONENT_HASHES[name]() for name in COMPONENTS}
-
-
-# -- planners -------------------------------------------------------------------------------------
-
-
-def _planner_modules(cls: type) -> dict[str, tuple[str, str]]:
-    own_top = cls.__module__.partition(".")[0]
-    packages = {*_PLANNER_PACKAGES, own_top}
-
-    def follow(module: str) -> bool:
-        if module in _NOT_FOLLOWED:
-            return False
-        if module in _PLANNER_EXTRA_MODULES:
-            return True
-        return module.partition(".")[0] in packages
-
-    config_model = getattr(cls, "config_model", None)
-    classes = [*cls.__mro__, *(config_model.__mro__ if isinstance(config_model, type) else ())]
-    roots = dict.fromkeys(c.__module__ for c in classes)
-    return _closure(roots, follow)
-
-
-def fingerprint_of_class(cls: type) -> str:
-    """The fingerprint of planner class `cls` with its default configuration."""
-    config = cls.config_model().model_dump(mode="json")  # type: ignore[attr-defined]
-    return _sha256({
-        "class": f"{cls.__module__}.{cls.__qualname__}",
-        "config": config,
-        "sources": _sources(_planner_modules(cls)),
-    })
-
-
-def planner_fingerprint(planner_id: str) -> str:
-    """The fingerprint of registered planner `planner_id` (``name`` means its latest version).
-    """
-    from planners.registry import spec
-
-    return fingerprint_of_class(spec(planner_id).cls)
-
-
-def planner_fingerprints(*, builtin_only: bool = True) -> dict[str, str]:
-    """{id: fingerprint} of every registered planner, or of the built-in ones (the lock's)."""
-    from planners.registry import specs
-
-    return {s.id: fingerprint_of_class(s.cls) for s in specs() if s.builtin or not builtin_only}
 
 
 # -- the lock -------------------------------------------------------------------------------------
@@ -325,7 +116,7 @@ def current_lock(benchmark_version: str) -> dict[str, Any]:
 
 
 def _components_digest(components: dict[str, str]) -> str:
-    return _sha256(components)[:8]
+    return sha256_of(components)[:8]
 
 
 def benchmark_version() -> str:

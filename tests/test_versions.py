@@ -12,6 +12,8 @@ from typing import Any
 
 import pytest
 
+import flybo.fingerprints as fingerprints
+import flybo.module_sources as module_sources
 import flybo.versions as versions
 from flybo.versions import (
     WRITE_COMMAND,
@@ -123,12 +125,12 @@ def test_write_creates_bumps_and_refuses_removals(
     assert load_lock(path) == _lock(tree)
     assert write_lock(path) == []  # up to date: nothing changes
 
-    monkeypatch.setitem(versions._COMPONENT_HASHES, "presets", lambda: "3" * 64)
+    monkeypatch.setitem(fingerprints._COMPONENT_HASHES, "presets", lambda: "3" * 64)
     lines = write_lock(path, today=datetime.date(2026, 12, 20))
     assert lines[0].startswith("component presets: changed")
     assert lines[-1] == "benchmark version: 2026.12-1 -> 2026.12-2"
     with pytest.raises(ValueError, match="must change"):
-        monkeypatch.setitem(versions._COMPONENT_HASHES, "presets", lambda: "4" * 64)
+        monkeypatch.setitem(fingerprints._COMPONENT_HASHES, "presets", lambda: "4" * 64)
         write_lock(path, name="2026.12-2")
     write_lock(path, name="2027.01-5")
     lock = load_lock(path)
@@ -164,7 +166,7 @@ def test_next_version(name: str, today: tuple[int, int, int], expected: str) -> 
 def test_benchmark_version_marks_a_modified_tree(monkeypatch: pytest.MonkeyPatch) -> None:
     lock = load_lock()
     assert lock is not None
-    monkeypatch.setitem(versions._COMPONENT_HASHES, "sim", lambda: "6" * 64)
+    monkeypatch.setitem(fingerprints._COMPONENT_HASHES, "sim", lambda: "6" * 64)
     marked = benchmark_version()
     assert marked.startswith(f"{lock['benchmark_version']}+modified.")
     assert len(marked.rsplit(".", 1)[1]) == 8
@@ -180,7 +182,7 @@ def test_benchmark_version_without_a_lock(monkeypatch: pytest.MonkeyPatch,
 
 
 def test_hashes_are_stable(tree: dict[str, Any]) -> None:
-    versions._imports.cache_clear()
+    module_sources.imports_of.cache_clear()
     assert component_hashes() == tree["components"]
     assert planner_fingerprints() == tree["planners"]
     assert planner_fingerprint("classic-v1") == tree["planners"]["classic-v1"]
@@ -192,7 +194,7 @@ def test_every_planner_id_has_its_own_fingerprint(tree: dict[str, Any]) -> None:
 
 
 def _edited(target: str, edit: str) -> Any:
-    real = versions.read_source
+    real = module_sources.read_source
 
     def read(path: Path) -> str:
         text = real(path)
@@ -204,7 +206,7 @@ def _edited(target: str, edit: str) -> Any:
 def test_editing_a_planner_source_changes_its_fingerprint(
     tree: dict[str, Any], monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    monkeypatch.setattr(versions, "_read", _edited("planners/classic.py", "\n# edited\n"))
+    monkeypatch.setattr(module_sources, "_read", _edited("planners/classic.py", "\n# edited\n"))
     after = planner_fingerprints()
     assert after["classic-v1"] != tree["planners"]["classic-v1"]
     # Everything built on Classic changes with it; ESM does not use it.
@@ -217,7 +219,7 @@ def test_editing_a_planner_source_changes_its_fingerprint(
 def test_editing_the_planner_interface_changes_every_fingerprint(
     tree: dict[str, Any], monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    monkeypatch.setattr(versions, "_read", _edited("sim/interface.py", "\n# edited\n"))
+    monkeypatch.setattr(module_sources, "_read", _edited("sim/interface.py", "\n# edited\n"))
     after = planner_fingerprints()
     assert all(after[i] != tree["planners"][i] for i in after)
     assert component_hashes()["sim"] != tree["components"]["sim"]
@@ -230,7 +232,7 @@ def test_editing_the_planner_interface_changes_every_fingerprint(
 def test_editing_a_component_source_changes_its_hash(
     tree: dict[str, Any], monkeypatch: pytest.MonkeyPatch, target: str, component: str,
 ) -> None:
-    monkeypatch.setattr(versions, "_read", _edited(target, "\n# edited\n"))
+    monkeypatch.setattr(module_sources, "_read", _edited(target, "\n# edited\n"))
     after = component_hashes()
     assert {c for c in after if after[c] != tree["components"][c]} == {component}
 
@@ -271,16 +273,16 @@ def planner_package(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator
     (root / "helpers.py").write_text("def reason():\n    return 'hover'\n", encoding="utf-8")
     (root / "unused.py").write_text("x = 1\n", encoding="utf-8")
     monkeypatch.syspath_prepend(str(tmp_path))
-    versions._top_level_location.cache_clear()
+    module_sources.top_level_location.cache_clear()
     yield root
-    versions._top_level_location.cache_clear()
+    module_sources.top_level_location.cache_clear()
     for name in [m for m in sys.modules if m == "zz_fp_pkg" or m.startswith("zz_fp_pkg.")]:
         del sys.modules[name]
 
 
 def test_fingerprint_follows_the_planners_own_package(planner_package: Path) -> None:
     cls = importlib.import_module("zz_fp_pkg.planner").Hover
-    modules = {rel for rel, _ in versions._planner_modules(cls).values()}
+    modules = {rel for rel, _ in fingerprints.planner_modules(cls).values()}
     assert {"zz_fp_pkg/planner.py", "zz_fp_pkg/helpers.py", "planners/api.py",
             "sim/interface.py"} <= modules
     assert "zz_fp_pkg/unused.py" not in modules
