@@ -3,7 +3,7 @@
 `run_episode` is the single entry point used by the CLI and the workers. The episode is made of
 parts with one job each:
 
-- the loop (`_EpisodeLoop`, here): simulated time, physics steps toward the reference, when to
+- the loop (`sim.episode_loop`): simulated time, physics steps toward the reference, when to
   ask the planner (at rest, or mid-flight when the plan asked for it with `Plan.replan_s`) and
   what its thinking costs on the simulated clock;
 - sensing and fusion (`sim.sensing`): camera frames, noise, occupancy map and TSDF;
@@ -19,34 +19,18 @@ and not simulated), on a collision (`crashed`) or on a planner failure.
 
 from __future__ import annotations
 
-import math
-import time
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
-
-import numpy as np
-import numpy.typing as npt
 
 from areas.area import Area, GroundTruth
 from sim import reference_speed
 from sim.config import EpisodeConfig
-from sim.episode_recorder import EpisodeRecorder
-from sim.flight import Flight, hold_at, startup_spin
-from sim.geometry import Pose
-from sim.interface import Observation, Plan, PlannerContext, PlannerLike, PlanOutcome
-from sim.measures import EpisodeCounters, EpisodeEnd, EpisodeView, Measure, make_measures
+from sim.episode_loop import Ending, EpisodeLoop, PlanReply, PlanRequest
+from sim.interface import Observation, PlannerContext, PlannerLike
 from sim.measures.base import ProgressCallback
-from sim.plan_check import PlanChecker, Start
 from sim.planning_charge import PlanningCharge
-from sim.result import EpisodeResult, RunStatus
-from sim.safety_monitor import SafetyMonitor
-from sim.sensing import RandomStreams, Sensing
-from sim.stage_costs import StageCosts
-from sim.trajectory import TrajectorySample
-from sim.world import World
+from sim.result import EpisodeResult
 
-__all__ = ["ProgressCallback", "run_episode"]
+__all__ = ["EpisodeStepper", "ProgressCallback", "run_episode"]
 
 
 def run_episode(
@@ -79,11 +63,10 @@ def run_episode(
     if speed_factor is None and config.planning_time_charge == "cpu":
         speed_factor = reference_speed.speed_factor()
     charge = PlanningCharge(config.planning_time_charge, speed_factor or 1.0, planner)
-    loop = _EpisodeLoop(area, ground_truth, planner, config, seed, planner_name, preset_name,
-                        seconds if seconds is not None else area.plateau_s, progress, charge,
-                        platform_errors)
+    loop = EpisodeLoop(area, ground_truth, config, seed, planner_name, preset_name,
+                       seconds if seconds is not None else area.plateau_s, progress)
     try:
-        result = loop.run()
+        result = loop.run_with(planner, charge, platform_errors)
     finally:
         loop.close()
     if recording_path is not None:
@@ -91,299 +74,52 @@ def run_episode(
     return result
 
 
-@dataclass(frozen=True)
-class _Ending:
-    status: RunStatus
-    reason: str
+class EpisodeStepper:
+    """An episode driven from outside, one plan at a time: `start` gives the planner's context
+    and the first observation, each `step` flies a plan until the next one is needed (None
+    when the run has ended), `result` scores the run. The loop is the one `run_episode` flies;
+    nothing is charged for thinking but what `step` is told (`charge_s`)."""
 
+    def __init__(self, area: Area, ground_truth: GroundTruth, config: EpisodeConfig, seed: int,
+                 *, planner_name: str = "agent", preset_name: str = "custom",
+                 seconds: float | None = None) -> None:
+        self.loop = EpisodeLoop(area, ground_truth, config, seed, planner_name, preset_name,
+                                seconds if seconds is not None else area.plateau_s, None)
+        self._steps = self.loop.steps()
+        self._ending: Ending | None = None
+        self._result: EpisodeResult | None = None
 
-class _PlannerFailedError(Exception):
-    """The planner raised, returned something else than a Plan, or the vehicle crashed while
-    it thought; the message is the run's reason."""
+    def start(self) -> tuple[PlannerContext, Observation | None]:
+        context = self.loop.begin()
+        return context, self._advance(None)
 
+    def step(self, plan: object, charge_s: float = 0.0) -> Observation | None:
+        """Fly `plan` (checked as any planner's) until the next plan is needed."""
+        if self._ending is not None:
+            raise RuntimeError("the episode has ended")
+        return self._advance(PlanReply(plan, 0.0, charge_s))
 
-class _EpisodeLoop:
-    def __init__(self, area: Area, ground_truth: GroundTruth, planner: PlannerLike,
-                 config: EpisodeConfig, seed: int, planner_name: str, preset_name: str,
-                 seconds: float, progress: ProgressCallback | None, charge: PlanningCharge,
-                 platform_errors: tuple[type[BaseException], ...]) -> None:
-        if not (seconds > 0 and math.isfinite(seconds)):
-            raise ValueError(f"seconds must be a positive number, got {seconds}")
-        self.area, self.planner, self.cfg = area, planner, config
-        self.seed, self.planner_name, self.preset_name = seed, planner_name, preset_name
-        self.t_end = float(seconds)
-        self.charge, self.platform_errors = charge, platform_errors
-        self.streams = RandomStreams.from_seed(seed)
-        self.costs = StageCosts()
-        self.sensing = Sensing(area, config, self.streams, self.costs)
-        self.checker = PlanChecker(area, config, self.sensing.mapping)
-        self.monitor = SafetyMonitor(config, self.sensing.mapping, self.costs)
-        self.world = World(area.vertices, area.triangles, area.start.position, config.limits,
-                           config.physics)
-        self.yaw = area.start.yaw
-        self.recorder = EpisodeRecorder(area, config, planner_name, seed, preset_name)
-        self.counters = EpisodeCounters()
-        self.view = EpisodeView(area, ground_truth, config, seed, self.sensing.mapping,
-                                self.sensing.tsdf, self.counters,
-                                self.sensing.camera.distance_to_surface_many, progress)
-        self.measures: list[Measure] = make_measures()
-        self.planned_from = area.start.position.copy()
-        self.frame_period = 1.0 / config.camera.rate_hz
-        self.next_frame = 0.0
+    def _advance(self, reply: PlanReply | None) -> Observation | None:
+        try:
+            request: PlanRequest = (next(self._steps) if reply is None
+                                    else self._steps.send(reply))
+        except StopIteration as stop:
+            self._ending = stop.value
+            return None
+        return request.observation
+
+    @property
+    def ended(self) -> bool:
+        return self._ending is not None
+
+    def result(self) -> EpisodeResult:
+        """The run's result, once it has ended."""
+        if self._ending is None:
+            raise RuntimeError("the episode has not ended")
+        if self._result is None:
+            self._result = self.loop.finish(self._ending)
+        return self._result
 
     def close(self) -> None:
-        self.world.close()
-
-    # -- the loop ---------------------------------------------------------------------------
-
-    def run(self) -> EpisodeResult:
-        wall0 = time.perf_counter()
-        self.sensing.clear_start_sphere(self.area.start.position, self.area.voxel_size)
-        for measure in self.measures:
-            measure.reset(self.view)
-        self.planner.reset(self._context())
-        # Reference state at rest, in the map frame: where the next trajectory starts.
-        rest = np.array([*self.area.start.position, self.area.start.yaw])
-        self._on_frame_boundaries()  # the first frame, at t = 0
-        ending = self._fly(rest)
-        simulated_until = self.world.time
-        return self._finish(ending, simulated_until, wall0)
-
-    def _context(self) -> PlannerContext:
-        a = self.area
-        return PlannerContext(
-            area=a.name, bounds_min=a.bounds_min.copy(), bounds_max=a.bounds_max.copy(),
-            start=Pose(a.start.position.copy(), a.start.yaw), limits=self.cfg.limits,
-            safety_radius_m=self.cfg.safety_radius_m, camera=self.cfg.camera,
-            rng=self.streams.planner,
-        )
-
-    def _fly(self, rest: npt.NDArray[np.float64]) -> _Ending:
-        """Fly until the time limit or an earlier end; `rest` is (4,) x, y, z, yaw."""
-        cfg = self.cfg
-        hold = hold_at(rest)
-        flight = startup_spin(rest, self.world.time, cfg.limits) if cfg.startup_spin else None
-        outcome = PlanOutcome.NONE
-        failures = 0
-        while self.world.time < self.t_end - 1e-9:
-            if flight is None:
-                try:
-                    plan = self._ask(outcome)
-                except _PlannerFailedError as exc:
-                    return self._failed(str(exc))
-                if plan.done:
-                    return _Ending(RunStatus.SUCCEEDED, _finished(plan))
-                # Fly from where odometry says the vehicle is, as the planner saw it: the
-                # reference it last held differs by the tracking error and the drift since.
-                flight, outcome = self._accept(plan, np.array([*self.planned_from, rest[3]]))
-                if flight is None:
-                    failures += 1
-                    if failures >= cfg.max_failed_plans:
-                        return _Ending(RunStatus.FAILED,
-                                       f"{failures} consecutive plans were {outcome.value}")
-                    if not self._hold(hold, cfg.failed_plan_hover_s):
-                        return _Ending(RunStatus.CRASHED, "collision while hovering")
-                    continue
-                failures = 0
-            elif flight.replan_due(self.world.time):
-                # A rejected mid-flight plan costs nothing but the call: the checked flight
-                # goes on, so it does not count toward `max_failed_plans`.
-                try:
-                    flight, outcome, ending = self._replan_in_flight(flight, outcome)
-                except _PlannerFailedError as exc:
-                    return self._failed(str(exc))
-                if ending is not None:
-                    return ending
-            if not self._physics_step(flight.reference(self.world.time)):
-                return _Ending(RunStatus.CRASHED, "collision with the scene")
-            if flight.finished(self.world.time):
-                hold = flight.end_state()
-                rest = np.array([*hold.position, hold.yaw])
-                outcome = PlanOutcome.BLOCKED if flight.braking else PlanOutcome.REACHED
-                flight = None
-            elif self.monitor.newly_blocked(flight, self.world.time,
-                                            self.sensing.occupancy_updates):
-                flight = self._safety_stop(flight)
-        return _Ending(RunStatus.SUCCEEDED, "time limit reached")
-
-    def _failed(self, reason: str) -> _Ending:
-        crashed = self.counters.collisions > 0  # while hovering or flying as it thought
-        return _Ending(RunStatus.CRASHED if crashed else RunStatus.FAILED, reason)
-
-    def _replan_in_flight(self, flight: Flight, outcome: PlanOutcome) -> tuple[
-        Flight, PlanOutcome, _Ending | None
-    ]:
-        """Ask the planner mid-flight; the new plan replaces the rest of `flight` only if it
-        passes the checks, else `flight` is flown on. Returns the flight to follow, the outcome
-        the planner sees next, and the ending if the run ends here."""
-        plan = self._ask(PlanOutcome.FLYING, flight)
-        if plan.done:
-            return flight, outcome, _Ending(RunStatus.SUCCEEDED, _finished(plan))
-        now = self.world.time
-        if plan.keep:
-            period = plan.replan_s
-            if period is not None and not (math.isfinite(period) and period > 0):
-                # A zero period would ask again without the clock moving.
-                flight.schedule_replan(now, flight.replan_s)
-                return flight, PlanOutcome.INVALID, None
-            flight.schedule_replan(now, period)
-            return flight, PlanOutcome.FLYING, None
-        new, result = self._accept(plan, flight.reference(now))
-        if new is None:
-            flight.schedule_replan(now, flight.replan_s)
-            return flight, result, None
-        return new, result, None
-
-    def _accept(self, plan: Plan, start: Start) -> tuple[Flight | None, PlanOutcome]:
-        """The plan checked and, if it can be flown, recorded and guarded."""
-        flight, outcome, waypoints = self.checker.check(plan, start, self.world.time)
-        if flight is not None:
-            self.recorder.plan(self.world.time, waypoints)
-            self.monitor.guard(flight, self.sensing.occupancy_updates)
-        return flight, outcome
-
-    def _safety_stop(self, flight: Flight) -> Flight:
-        """Brake from the current reference state; fly on as planned if no stop is possible."""
-        stop = self.monitor.stop(flight, self.world.time)
-        if stop is None:
-            return flight
-        self.counters.safety_stops += 1
-        self.recorder.plan(self.world.time, stop.trajectory.waypoints)
-        return stop
-
-    # -- the planner ------------------------------------------------------------------------
-
-    def _ask(self, outcome: PlanOutcome, flight: Flight | None = None) -> Plan:
-        """The planner's next plan; its thinking time is charged as the preset says."""
-        pose = self._estimated_pose()
-        self.planned_from = pose.position
-        obs = Observation(
-            time=self.world.time, pose=pose, velocity=self.world.velocity.copy(),
-            map=self.sensing.mapping.view(), last_outcome=outcome,
-        )
-        t0, cpu0 = time.perf_counter(), self.charge.cpu_seconds()
-        try:
-            plan = self.planner.plan(obs)
-        except self.platform_errors:
-            raise
-        except Exception as exc:  # a planner bug ends its run, not the process
-            raise _PlannerFailedError(f"planner raised {type(exc).__name__}: {exc}") from exc
-        elapsed = time.perf_counter() - t0
-        charge = self.charge.seconds(elapsed, self.charge.cpu_seconds() - cpu0)
-        self.costs.planner += elapsed
-        self.counters.planning_ms.append(1000.0 * elapsed)
-        self.counters.charged_s.append(charge)
-        if not isinstance(plan, Plan):
-            raise _PlannerFailedError(f"planner returned {type(plan).__name__}, not a Plan")
-        if charge > 0:
-            self._think(charge, flight)
-        return plan
-
-    def _think(self, seconds: float, flight: Flight | None) -> None:
-        """The simulated clock runs on while the planner thinks: the vehicle hovers, as in a
-        real-time system, or, asked mid-flight, flies on along the current trajectory."""
-        if flight is not None:
-            if not self._follow(flight, seconds):
-                raise _PlannerFailedError("collision while flying")
-            return
-        here = self._estimated_pose()
-        hold = TrajectorySample(here.position, np.zeros(3), np.zeros(3), here.yaw, 0.0)
-        if not self._hold(hold, seconds):
-            raise _PlannerFailedError("collision while hovering")
-
-    # -- physics and frames -----------------------------------------------------------------
-
-    def _follow(self, flight: Flight, seconds: float) -> bool:
-        """Fly on along `flight` for `seconds` (holding its end if it ends first)."""
-        end = self.world.time + seconds
-        while self.world.time < min(end, self.t_end) - 1e-9:
-            if not self._physics_step(flight.reference(self.world.time)):
-                return False
-        return True
-
-    def _hold(self, hold: TrajectorySample, seconds: float) -> bool:
-        end = self.world.time + seconds
-        while self.world.time < min(end, self.t_end) - 1e-9:
-            if not self._physics_step(hold):
-                return False
-        return True
-
-    def _physics_step(self, ref: TrajectorySample) -> bool:
-        """One physics step toward `ref` (map frame); False on a collision."""
-        t0 = time.perf_counter()
-        before = self.world.position
-        # The controller sees the estimated position, so it flies the map-frame reference
-        # shifted by the odometry drift in the true world.
-        drift = self.sensing.drift.offset
-        shifted = TrajectorySample(ref.position - drift, ref.velocity, ref.acceleration,
-                                   ref.yaw, ref.yaw_rate)
-        contact = self.world.step(shifted)
-        self.yaw = ref.yaw
-        self.counters.path_length_m += float(np.linalg.norm(self.world.position - before))
-        self.costs.physics += time.perf_counter() - t0
-        if contact is not None:
-            self.counters.collisions += 1
-            return False
-        self._on_frame_boundaries()
-        return True
-
-    def _on_frame_boundaries(self) -> None:
-        now = self.world.time
-        while self.next_frame <= now + 1e-9:
-            self._camera_frame(self.next_frame)
-            self.next_frame += self.frame_period
-        self.recorder.pose(now, self.world.position, self.yaw)
-
-    def _camera_frame(self, stamp: float) -> None:
-        self.sensing.frame(stamp, Pose(self.world.position.copy(), self.yaw))
-        t0 = time.perf_counter()
-        for measure in self.measures:
-            measure.update(self.view, stamp)
-        t1 = time.perf_counter()
-        self.recorder.frame(stamp, self.sensing)
-        self.costs.metrics += t1 - t0
-        self.costs.recording += time.perf_counter() - t1
-
-    def _estimated_pose(self) -> Pose:
-        return self.sensing.estimate(Pose(self.world.position.copy(), self.yaw))
-
-    # -- the end ----------------------------------------------------------------------------
-
-    def _finish(self, ending: _Ending, simulated_until: float, wall0: float) -> EpisodeResult:
-        t0 = time.perf_counter()
-        self.recorder.finish(simulated_until, self.sensing)
-        self.costs.recording += time.perf_counter() - t0
-        t0 = time.perf_counter()
-        end = EpisodeEnd(ending.status, self.t_end, simulated_until)
-        done: dict[str, Any] = {}
-        for measure in self.measures:
-            done[measure.name] = measure.result(self.view, end, {
-                name: done[name] for name in measure.requires})
-        metrics: dict[str, float | None] = {}
-        for measure in self.measures:
-            metrics.update(measure.scalars(done[measure.name]))
-        self.costs.metrics += time.perf_counter() - t0
-        succeeded = ending.status is RunStatus.SUCCEEDED
-        volume, recall = done["explored_volume"], done["recall_series"]
-        mesh = done["reconstruction"]
-        return EpisodeResult(
-            area=self.area.name, planner=self.planner_name, seed=self.seed,
-            preset=self.preset_name, status=ending.status, reason=ending.reason,
-            sim_seconds=self.t_end if succeeded else simulated_until,
-            simulated_until=simulated_until, wall_seconds=time.perf_counter() - wall0,
-            explored_volume_m3=self.sensing.mapping.occupancy.explored_volume_m3,
-            observable_volume_m3=self.view.truth.observable_volume_m3,
-            coverage=done["coverage"].coverage, collisions=done["collisions"],
-            path_length_m=done["path_length"], iterations=done["planning"].iterations,
-            planning_times_ms=done["planning"].wall_ms, surface=done["surface"],
-            volume_times=volume.times, volume_m3=volume.values,
-            recall_times=recall.times, recall=recall.values,
-            frame_costs_ms=self.costs.per_frame_ms(),
-            mesh_vertices=mesh.vertices, mesh_triangles=mesh.triangles,
-            safety_stops=done["safety_stops"], metrics=metrics,
-            charged_s=done["planning"].charged_s, charge=self.charge.describe(),
-        )
-
-
-def _finished(plan: Plan) -> str:
-    return f"planner finished: {plan.info.get('reason', 'done')}"
+        self._steps.close()
+        self.loop.close()
