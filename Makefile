@@ -9,7 +9,7 @@ TEST_SYSTEM_PACKAGES := chromium
 # The HTTP load generator of benchmarks/leaderboard_throughput.py (benchmarks only).
 BENCHMARK_SYSTEM_PACKAGES := wrk
 
-.PHONY: install system-deps test-system-deps benchmark-system-deps apt-packages run demo-run test lint typecheck benchmark clean
+.PHONY: install system-deps test-system-deps benchmark-system-deps apt-packages run demo-run test test-fast lint typecheck benchmark clean
 
 install: $(STAMP)
 
@@ -51,10 +51,19 @@ run: install
 demo-run: install
 	$(BIN)/flybo run --area maze --planner classic --seed 0 --out data/runs/maze-classic-$$(date +%Y%m%d-%H%M%S)
 
+# Everything: lint, types and every test (the slow ones, the browser tests and the wheel's
+# install into a fresh environment included).
 test: install test-system-deps
 	$(BIN)/ruff check .
 	$(BIN)/mypy
 	$(BIN)/pytest
+
+# The inner loop, a few minutes: lint, types and the tests not marked `slow` (tests/conftest.py
+# marks the long ones of every folder). Needs no browser.
+test-fast: install
+	$(BIN)/ruff check .
+	$(BIN)/mypy
+	$(BIN)/pytest -m "not slow"
 
 benchmark: install benchmark-system-deps
 	$(BIN)/python benchmarks/sim_speed.py

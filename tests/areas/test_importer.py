@@ -58,17 +58,20 @@ def _check_real(area: Area, expected: tuple[float, float, float]) -> None:
     assert compute_ground_truth(area).observable_volume_m3 > 0.0
 
 
+@pytest.mark.slow  # the COLLADA parse and ground truth of a real building
 def test_cafe_imports_in_metres(cafe: Area) -> None:
     _check_real(cafe, (10.0, 24.0, 2.9))
     assert cafe.info.levels == 1
 
 
+@pytest.mark.slow  # the COLLADA parse and ground truth of a real building
 def test_apartment_imports_in_metres() -> None:
     area = import_mesh(MESHES / "apartment.dae", "apartment")
     _check_real(area, (20.0, 22.0, 15.0))
     assert area.info.levels >= 2
 
 
+@pytest.mark.slow
 def test_short_flight_in_the_cafe(cafe: Area) -> None:
     from planners.registry import make
     from sim.config import preset

@@ -15,6 +15,8 @@ from worker.sandbox.dry_run import tiny_area
 from worker.sandbox.isolation import Isolation, SandboxLimits
 from worker.sandbox.proxy import SandboxedPlanner
 
+pytestmark = pytest.mark.slow  # each test starts the sandbox and flies
+
 # Each plan call does `WORK` for 0.3 s, then holds position; the fourth call ends the run.
 PLANNER = '''
 import threading
