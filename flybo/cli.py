@@ -24,6 +24,7 @@ from rich.table import Table
 
 from flybo.errors import CliError
 from flybo.service_cli import add_service_commands, check_planner, run_service_command
+from worker.result_folder import MESH, RECORDING, RESULT, ResultFolderError, write_result_folder
 
 __all__ = ["CliError", "main"]
 
@@ -247,7 +248,8 @@ def _list_presets() -> None:
 
 
 def _run(args: argparse.Namespace) -> None:
-    from areas import UnknownAreaError, load_area, load_ground_truth  # the simulation stack: on use
+    # The simulation stack: on use.
+    from areas import UnknownAreaError, load_area, load_ground_truth
     from planners.registry import PlannerConfigError, UnknownPlannerError, make, spec
     from sim.config import UnknownPresetError, preset
 
@@ -273,15 +275,16 @@ def _run(args: argparse.Namespace) -> None:
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
         result = _run_with_progress(args, area, truth, planner, planner_spec.id, config, staging)
-        payload = result.to_json()
-        (staging / "result.json").write_text(json.dumps(payload, indent=2) + "\n")
-        _write_ply(staging / "mesh.ply", result.mesh_vertices, result.mesh_triangles)
+        try:
+            write_result_folder(result, staging)
+        except ResultFolderError as exc:
+            raise CliError(str(exc)) from None
         staging.chmod(0o755)  # mkdtemp makes it private
         staging.rename(out)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
-    _print_summary(payload, out)
+    _print_summary(result.to_json(), out)
 
 
 def _run_with_progress(
@@ -296,7 +299,7 @@ def _run_with_progress(
     from sim.episode import run_episode  # the simulation stack: on use
 
     seconds = args.seconds if args.seconds is not None else area.plateau_s
-    recording = staging / "recording.npz"
+    recording = staging / RECORDING
     if args.quiet:
         return run_episode(area, truth, planner, config, args.seed, planner_name=planner_id,
                            preset_name=args.preset, seconds=seconds, recording_path=recording)
@@ -314,16 +317,6 @@ def _run_with_progress(
                              progress=progress)
         bar.update(task, completed=seconds)
     return result
-
-
-def _write_ply(path: Path, vertices: np.ndarray, triangles: np.ndarray) -> None:
-    from sim.open3d_any import o3d  # the simulation stack: on use
-
-    mesh = o3d.geometry.TriangleMesh(
-        o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles)
-    )
-    if not o3d.io.write_triangle_mesh(str(path), mesh, write_ascii=False):
-        raise CliError(f"could not write {path}")
 
 
 def _print_summary(payload: dict[str, Any], out: Path) -> None:
@@ -356,4 +349,4 @@ def _print_summary(payload: dict[str, Any], out: Path) -> None:
         table.add_row(key, value)
     console = Console()
     console.print(table)
-    console.print(f"results in {out}/ (result.json, recording.npz, mesh.ply)")
+    console.print(f"results in {out}/ ({RESULT}, {RECORDING}, {MESH})")

@@ -104,12 +104,19 @@ def sync_builtin_planners(session: Session) -> None:
 
 
 def find_planner(session: Session, name: str) -> PlannerRow:
-    """`name` (newest version) or `name-vN` (that version)."""
-    base, version = name, None
-    if "-v" in name:
-        head, _, tail = name.rpartition("-v")
-        if tail.isdigit():
+    """`name` (newest version) or `name-vN` (that version), in any case. A built-in planner's
+    name is read by the planner registry, exactly as `flybo run --planner` reads it."""
+    from planners.registry import UnknownPlannerError, spec  # the simulation stack, on use
+
+    base, version = name.strip().lower(), None
+    try:
+        builtin = spec(base)
+    except UnknownPlannerError:  # an uploaded planner (their names never clash with built-ins)
+        head, _, tail = base.rpartition("-v")
+        if head and tail.isdigit():
             base, version = head, int(tail)
+    else:
+        base, version = builtin.name, builtin.version
     query = select(PlannerRow).where(PlannerRow.name == base)
     if version is not None:
         query = query.where(PlannerRow.version == version)

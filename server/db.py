@@ -14,7 +14,8 @@ from sqlalchemy.orm import Session, sessionmaker
 def make_engine(url: str) -> Engine:
     """An engine for `url`; SQLite gets WAL, a busy timeout and enforced foreign keys, because
     the API and worker processes write to the same file."""
-    # Many request threads may wait on the database at once (the API's thread pool has 40).
+    # Up to 40 connections per engine. The API's request threads outnumber them on purpose
+    # (`server.app.THREADS`, see there), so many may wait here for a connection at once.
     kwargs: dict[str, Any] = {"pool_pre_ping": True, "pool_size": 20, "max_overflow": 20}
     if url.startswith("sqlite"):
         path = url.split("///", 1)[-1]

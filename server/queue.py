@@ -69,6 +69,6 @@ def enqueue_run(settings: Settings, run_id: int, sim_seconds: float) -> None:
     The message carries the run's wall-time limits: soft (the task fails the run cleanly) and
     hard (the worker process is killed, and the sweeper fails or requeues the run)."""
     app = _producer(settings.broker, str(settings.resolved_data_dir))
-    hard = settings.run_time_limit_s(sim_seconds)
-    app.send_task(RUN_TASK, args=[run_id], queue=QUEUE, soft_time_limit=hard,
-                  time_limit=hard + 60.0)
+    app.send_task(RUN_TASK, args=[run_id], queue=QUEUE,
+                  soft_time_limit=settings.run_soft_time_limit_s(sim_seconds),
+                  time_limit=settings.run_time_limit_s(sim_seconds))

@@ -28,6 +28,11 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 DEVELOPMENT_SECRET = "development-only-secret-do-not-use-in-production"
 
 
+# A run is told to stop (and fails cleanly) this long before its hard limit kills its process;
+# a quarter of the limit when that is shorter.
+SOFT_TIME_LIMIT_MARGIN_S = 60.0
+
+
 def default_data_dir() -> Path:
     """`data_dir` when `FLYBO_DATA_DIR` is not set (the rule of `areas.store.areas_dir` too)."""
     return Path.home() / ".local" / "share" / "flybo"
@@ -155,8 +160,14 @@ class Settings(BaseSettings):
         return int(self.max_area_upload_mib * 1024 * 1024)
 
     def run_time_limit_s(self, sim_seconds: float) -> float:
-        """Hard wall-time limit of one run of `sim_seconds` simulated seconds."""
+        """Hard wall-time limit of one run of `sim_seconds` simulated seconds: past it, the
+        worker process running it is killed."""
         return self.run_time_limit_base_s + self.run_time_limit_per_sim_s * sim_seconds
+
+    def run_soft_time_limit_s(self, sim_seconds: float) -> float:
+        """Soft wall-time limit of that run: past it, the run is stopped and fails cleanly."""
+        hard = self.run_time_limit_s(sim_seconds)
+        return hard - min(SOFT_TIME_LIMIT_MARGIN_S, hard / 4)
 
 
 def load_settings() -> Settings:

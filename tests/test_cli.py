@@ -192,6 +192,18 @@ def test_presets_lists_every_preset(capsys: pytest.CaptureFixture[str]) -> None:
 # -- a real run ----------------------------------------------------------------------------------
 
 
+def test_a_mesh_that_cannot_be_written_is_an_error_and_leaves_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from sim.open3d_any import o3d
+
+    monkeypatch.setattr(o3d.io, "write_triangle_mesh", lambda *args, **kwargs: False)
+    assert _exit_code(_run_args(tmp_path / "run", **{"--seconds": "3"})) == 2
+    assert "could not write" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []  # neither the folder nor its staging copy
+
+
+
 @pytest.mark.slow
 def test_short_run_writes_its_results(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "run"

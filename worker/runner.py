@@ -13,7 +13,6 @@
 from __future__ import annotations
 
 import collections
-import json
 import logging
 import os
 import secrets
@@ -50,6 +49,7 @@ from server.models import (
 from server.planner_package import read_stored_package
 from server.settings import Settings
 from server.storage import ArtifactStore, ArtifactStoreError, StoredArtifact, settings_store
+from worker.result_folder import RECORDING, write_result_folder
 from worker.sandbox.isolation import SandboxLimits
 
 if TYPE_CHECKING:
@@ -283,9 +283,11 @@ def _fly_and_store(factory: sessionmaker[Session], settings: Settings, held: Cla
             return "cancelled"
         return "lost its claim"
     except SoftTimeLimitExceeded:
-        limit = settings.run_time_limit_s(spec.seconds)
+        soft = settings.run_soft_time_limit_s(spec.seconds)
+        hard = settings.run_time_limit_s(spec.seconds)
         _finish(factory, held, RunState.FAILED, wall0, kind=FailureKind.PLANNER,
-                error=f"exceeded its wall-time limit of {limit:.0f} s")
+                error=f"exceeded its wall-time limit: stopped after {soft:.0f} s "
+                      f"(hard limit {hard:.0f} s)")
         return "timed out"
     except SandboxError as exc:
         _finish(factory, held, RunState.FAILED, wall0, kind=FailureKind.PLANNER, error=str(exc))
@@ -343,7 +345,7 @@ def _simulate(spec: _RunSpec, area: Area, tmp: Path, beat: Heartbeat, store: Art
     def fly(planner: PlannerLike) -> EpisodeResult:
         return run_episode(area, truth, planner, preset(spec.preset), spec.seed,
                            planner_name=spec.planner, preset_name=spec.preset,
-                           seconds=spec.seconds, recording_path=tmp / "recording.npz",
+                           seconds=spec.seconds, recording_path=tmp / RECORDING,
                            progress=progress)
 
     if spec.planner_builtin and not settings.sandbox_builtin:
@@ -369,19 +371,13 @@ def _simulate(spec: _RunSpec, area: Area, tmp: Path, beat: Heartbeat, store: Art
                 log.info("planner output (last lines):\n%s", tail)
 
 
-def _write_files(result: EpisodeResult, tmp: Path) -> dict[str, tuple[Path, str]]:
-    from sim.open3d_any import o3d  # the simulation stack, see _load_area
+CONTENT_TYPES = {"recording": "application/octet-stream", "mesh": "application/octet-stream",
+                 "result": "application/json"}
 
-    mesh_path = tmp / "mesh.ply"
-    mesh = o3d.geometry.TriangleMesh(
-        o3d.utility.Vector3dVector(np.asarray(result.mesh_vertices, dtype=np.float64)),
-        o3d.utility.Vector3iVector(np.asarray(result.mesh_triangles, dtype=np.int32)))
-    o3d.io.write_triangle_mesh(str(mesh_path), mesh, write_ascii=False)
-    result_path = tmp / "result.json"
-    result_path.write_text(json.dumps(result.to_json()))
-    return {"recording": (tmp / "recording.npz", "application/octet-stream"),
-            "mesh": (mesh_path, "application/octet-stream"),
-            "result": (result_path, "application/json")}
+
+def _write_files(result: EpisodeResult, tmp: Path) -> dict[str, tuple[Path, str]]:
+    return {kind: (path, CONTENT_TYPES[kind])
+            for kind, path in write_result_folder(result, tmp).items()}
 
 
 def _f32(values: npt.ArrayLike) -> bytes:

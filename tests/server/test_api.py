@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import pytest
@@ -46,6 +47,15 @@ def test_areas_and_planners(client: TestClient) -> None:
     assert unknown.status_code == 404 and "classic-v1" in unknown.json()["detail"]
 
 
+def test_planner_names_are_read_as_the_command_line_reads_them(client: TestClient,
+                                                                tokens: Any) -> None:
+    for name in ("Classic", "CLASSIC-V1", " classic "):
+        assert client.get(f"/api/v1/planners/{name}").json()["id"] == "classic-v1", name
+    job = _submit(client, tokens.auth("alice"), planner="Classic", runs=1)
+    assert job.status_code == 201 and job.json()["planner"] == "classic-v1", job.text
+    assert client.get("/api/v1/planners/classic-v9").status_code == 404
+
+
 def test_create_and_read_a_job(client: TestClient, tokens: Any) -> None:
     response = _submit(client, tokens.auth("alice"))
     assert response.status_code == 201, response.text
@@ -66,6 +76,18 @@ def test_the_job_is_on_the_real_broker(client: TestClient, tokens: Any,
     _submit(client, tokens.auth("alice"))
     messages = list((settings.broker_folder / "queue").iterdir())
     assert len(messages) == 2  # one message per run, in kombu's filesystem transport
+
+
+def test_each_message_carries_a_soft_limit_before_the_hard_one(
+    client: TestClient, tokens: Any, settings: Settings,
+) -> None:
+    _submit(client, tokens.auth("alice"), runs=1, seconds=100)
+    (message,) = (settings.broker_folder / "queue").iterdir()
+    hard, soft = json.loads(message.read_text())["headers"]["timelimit"]
+    assert hard == settings.run_time_limit_s(100) == 400
+    assert soft == settings.run_soft_time_limit_s(100) == 340  # a minute to fail cleanly
+    short = settings.model_copy(update={"run_time_limit_base_s": 20.0})
+    assert short.run_soft_time_limit_s(0) == 15  # a quarter of a short limit
 
 
 def test_listing_is_paginated_and_filtered(client: TestClient, tokens: Any) -> None:

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
 from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -141,5 +142,23 @@ def test_a_full_artifact_store_fails_the_run_cleanly(sessions: sessionmaker[Sess
         assert run is not None and run.status == RunState.FAILED.value
         assert run.failure_kind == "platform"
         assert run.error is not None and "could not store the run's artifacts" in run.error
+    assert _count(sessions, RunResult, run_id) == 0
+    assert _count(sessions, Artifact, run_id) == 0
+
+
+def test_a_mesh_that_cannot_be_written_fails_the_run(sessions: sessionmaker[Session],
+                                                      settings: Settings,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """The result folder's writer checks the mesh writer's answer (one writer for the worker
+    and `flybo run`): a run whose mesh was not written stores nothing."""
+    from sim.open3d_any import o3d
+
+    (run_id,) = _job(sessions, settings, seconds=4.0)
+    monkeypatch.setattr(o3d.io, "write_triangle_mesh", lambda *args, **kwargs: False)
+    assert execute_run(run_id, settings) == "failed"
+    with sessions() as s:
+        run = s.get(Run, run_id)
+        assert run is not None and run.failure_kind == "platform"
+        assert run.error is not None and "could not write" in run.error and "mesh.ply" in run.error
     assert _count(sessions, RunResult, run_id) == 0
     assert _count(sessions, Artifact, run_id) == 0

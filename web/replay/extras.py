@@ -168,7 +168,7 @@ class _AreaTruth:
 # Trees of the areas last used; one of a large area holds hundreds of MB.
 _TRUTHS_KEPT = 2
 # Truth points in a tree at most: a 2 cm cloud of the largest areas has tens of millions, and a
-# seeded subsample of this size keeps the spacing within a few cm on them (all of MAZE's 4 M).
+# seeded subsample of this size keeps the spacing within a few cm on them (all of MAZE's).
 TREE_MAX_POINTS = 8_000_000
 _truths: dict[tuple[str, str | None, int], _AreaTruth] = {}
 _truths_lock = threading.Lock()
@@ -191,7 +191,7 @@ def _area_truth(run: RunData) -> _AreaTruth:
             if len(truth) > TREE_MAX_POINTS:
                 truth = truth[np.sort(rng.choice(len(truth), TREE_MAX_POINTS, replace=False))]
             tree = cKDTree(np.asarray(truth, dtype=np.float64), balanced_tree=False,
-                           compact_nodes=False)  # builds 3x faster; queries are few
+                           compact_nodes=False)  # builds faster; queries are few
             while len(_truths) >= _TRUTHS_KEPT:
                 _truths.pop(next(iter(_truths)))
             found = _truths[key] = _AreaTruth(np.asarray(shown, dtype=np.float32), tree)

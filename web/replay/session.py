@@ -294,7 +294,7 @@ class ClientSession:
         # point clouds on a laptop, let alone software WebGL, and they add nothing here.
         self.client.scene.configure_default_lights(enabled=True, cast_shadow=False)
         # The default image-based lighting (an HDR environment map) is prefiltered in the
-        # browser at start: 5-9 s in software WebGL, before anything is drawn. The default
+        # browser at start, for seconds in software WebGL, before anything is drawn. The default
         # lights alone light the flat-shaded meshes well enough.
         self.client.scene.configure_environment_map(None)
         with gui.add_folder("Timeline"):
