@@ -1,5 +1,5 @@
-"""`python -m flybo` is the `flybo` command."""
+"""`python -m flybo` is the `flybo` command (the installation check first)."""
 
-from flybo.cli import main
+from flybo.distribution import main
 
 main()

@@ -28,7 +28,7 @@ from sim.episode_loop import Ending, EpisodeLoop, PlanReply, PlanRequest
 from sim.interface import Observation, PlannerContext, PlannerLike
 from sim.measures.base import ProgressCallback
 from sim.planning_charge import PlanningCharge
-from sim.result import EpisodeResult
+from sim.result import EpisodeResult, RunStatus
 
 __all__ = ["EpisodeStepper", "ProgressCallback", "run_episode"]
 
@@ -107,6 +107,12 @@ class EpisodeStepper:
             self._ending = stop.value
             return None
         return request.observation
+
+    def stop(self, reason: str) -> None:
+        """End the run here, as a planner that says it is done (the curves stay flat)."""
+        if self._ending is None:
+            self._steps.close()
+            self._ending = Ending(RunStatus.SUCCEEDED, f"planner finished: {reason}")
 
     @property
     def ended(self) -> bool:

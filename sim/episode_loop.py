@@ -257,12 +257,8 @@ class EpisodeLoop:
         PlanRequest, PlanReply, Plan
     ]:
         """The planner's next plan; its thinking time is charged as the reply says."""
-        pose = self._estimated_pose()
-        self.planned_from = pose.position
-        obs = Observation(
-            time=self.world.time, pose=pose, velocity=self.world.velocity.copy(),
-            map=self.sensing.mapping.view(), last_outcome=outcome,
-        )
+        obs = self.observation(outcome)
+        self.planned_from = obs.pose.position
         reply = yield PlanRequest(obs, in_flight=flight is not None)
         if reply.failure is not None:
             raise _PlannerFailedError(reply.failure)
@@ -340,6 +336,14 @@ class EpisodeLoop:
         self.recorder.frame(stamp, self.sensing)
         self.costs.metrics += t1 - t0
         self.costs.recording += time.perf_counter() - t1
+
+    def observation(self, outcome: PlanOutcome) -> Observation:
+        """What a planner asked now would see."""
+        return Observation(
+            time=self.world.time, pose=self._estimated_pose(),
+            velocity=self.world.velocity.copy(), map=self.sensing.mapping.view(),
+            last_outcome=outcome,
+        )
 
     def _estimated_pose(self) -> Pose:
         return self.sensing.estimate(Pose(self.world.position.copy(), self.yaw))

@@ -53,6 +53,9 @@ class Sensing:
         self._depth_rng = streams.depth
         self.frame_index = 0
         self.occupancy_updates = 0  # frames fused into the occupancy map so far
+        # The last full-resolution frame (H, W) metres, as fused (noise included); NaN before.
+        self.last_depth = np.full((config.camera.height, config.camera.width), np.nan,
+                                  dtype=np.float32)
 
     def estimate(self, true_pose: Pose) -> Pose:
         """The pose as odometry reports it (the map frame)."""
@@ -89,6 +92,7 @@ class Sensing:
         t2 = time.perf_counter()
         costs.occupancy += t2 - t1
         if fuse_tsdf:
+            self.last_depth = depth
             self._fuse_tsdf(depth, estimate)
             costs.tsdf += time.perf_counter() - t2
 
