@@ -23,6 +23,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from flybo.errors import CliError
+from flybo.record import reproducibility_record
 from flybo.service_cli import add_service_commands, check_planner, run_service_command
 from worker.result_folder import MESH, RECORDING, RESULT, ResultFolderError, write_result_folder
 
@@ -275,8 +276,12 @@ def _run(args: argparse.Namespace) -> None:
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
         result = _run_with_progress(args, area, truth, planner, planner_spec.id, config, staging)
+        record = reproducibility_record(
+            area=area, planner_id=planner_spec.id,
+            planner_config=planner.config.model_dump(mode="json"), preset_name=args.preset,
+            preset=config, seed=args.seed, speed_factor=result.charge.get("speed_factor"))
         try:
-            write_result_folder(result, staging)
+            write_result_folder(result, staging, record)
         except ResultFolderError as exc:
             raise CliError(str(exc)) from None
         staging.chmod(0o755)  # mkdtemp makes it private
@@ -284,7 +289,7 @@ def _run(args: argparse.Namespace) -> None:
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
-    _print_summary(result.to_json(), out)
+    _print_summary({**result.to_json(), "reproducibility": record}, out)
 
 
 def _run_with_progress(
@@ -344,6 +349,11 @@ def _print_summary(payload: dict[str, Any], out: Path) -> None:
         ("surface precision / recall",
          f"{num(surface['precision'], '.3f')} / {num(surface['recall'], '.3f')}"),
         ("surface RMSE", f"{num(surface['rmse_m'], '.4f')} m"),
+        ("time to 90 % coverage",
+         f"{num(payload['metrics'].get('time_to_90_coverage_s'), '.0f')} s"),
+        ("planning charged", f"{payload['planning_charge']['total_s']:.2f} s "
+                             f"({payload['planning_charge']['mode']})"),
+        ("benchmark version", str(payload["reproducibility"].get("benchmark_version"))),
     ]
     for key, value in rows:
         table.add_row(key, value)
