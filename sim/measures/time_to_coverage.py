@@ -25,10 +25,21 @@ class TimeToCoverage(Measure):
         self.next = 0.0
         self.reached: float | None = None
         self.needed = THRESHOLD * ep.truth.observable_volume_m3 / ep.area.voxel_size**3
+        # Kept up to date from the boxes of voxels whose state changed, not recounted over the
+        # whole grid: a voxel once known stays known.
+        occ = ep.mapping.occupancy
+        self.changes = occ.subscribe()
+        self.seen = (occ.state != 0) & ep.truth.observable
+        self.count = int(np.count_nonzero(self.seen))
 
     def _reached_now(self, ep: EpisodeView) -> bool:
-        known = ep.mapping.occupancy.state != 0
-        return bool(np.count_nonzero(known & ep.truth.observable) >= self.needed)
+        box = self.changes.take()
+        if box is not None:
+            part = box.slices()
+            now = (ep.mapping.occupancy.state[part] != 0) & ep.truth.observable[part]
+            self.count += int(np.count_nonzero(now)) - int(np.count_nonzero(self.seen[part]))
+            self.seen[part] = now
+        return self.count >= self.needed
 
     def update(self, ep: EpisodeView, stamp: float) -> None:
         if self.reached is not None or stamp < self.next - 1e-9:
@@ -36,6 +47,7 @@ class TimeToCoverage(Measure):
         self.next += ep.config.volume_interval_s
         if self._reached_now(ep):
             self.reached = round(stamp, 6)
+            self.changes.take()
 
     def result(self, ep: EpisodeView, end: EpisodeEnd, done: Mapping[str, Any]) -> float | None:
         if self.reached is None and end.flat_to_end and end.simulated_until < end.t_end \

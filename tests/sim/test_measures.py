@@ -63,10 +63,21 @@ def test_bad_registrations_are_refused(monkeypatch: pytest.MonkeyPatch) -> None:
         measure_names()
 
 
+class _Occupancy:
+    """The states and a subscription that reports the whole grid as changed."""
+
+    def __init__(self, state: np.ndarray) -> None:
+        self.state = state
+
+    def subscribe(self) -> SimpleNamespace:
+        box = SimpleNamespace(slices=lambda: (slice(None),) * 3)
+        return SimpleNamespace(take=lambda: box)
+
+
 def _view(observable: np.ndarray) -> tuple[EpisodeView, np.ndarray]:
     state = np.zeros_like(observable, dtype=np.uint8)
     ns = SimpleNamespace(
-        mapping=SimpleNamespace(occupancy=SimpleNamespace(state=state)),
+        mapping=SimpleNamespace(occupancy=_Occupancy(state)),
         truth=SimpleNamespace(observable=observable,
                               observable_volume_m3=float(observable.sum()) * 0.1**3),
         area=SimpleNamespace(voxel_size=0.1),
@@ -102,3 +113,27 @@ def test_time_to_90_coverage_never_reached_is_none() -> None:
         measure.update(ep, i / 20.0)
     assert measure.result(ep, EpisodeEnd(RunStatus.CRASHED, 5.0, 2.0), {}) is None
     assert measure.scalars(None) == {"time_to_90_coverage_s": None}
+
+
+def test_time_to_90_coverage_counts_as_a_full_recount_would() -> None:
+    from sim.occupancy import OccupancyConfig, OccupancyMap
+
+    occ = OccupancyMap(np.zeros(3), (40, 40, 10), 0.1, OccupancyConfig())
+    rng = np.random.default_rng(3)
+    observable = rng.random((40, 40, 10)) < 0.7
+    ns = SimpleNamespace(
+        mapping=SimpleNamespace(occupancy=occ),
+        truth=SimpleNamespace(observable=observable,
+                              observable_volume_m3=float(observable.sum()) * 0.1**3),
+        area=SimpleNamespace(voxel_size=0.1), config=SimpleNamespace(volume_interval_s=1.0))
+    ep = cast(EpisodeView, ns)
+    measure = TimeToCoverage()
+    measure.reset(ep)
+    for step in range(60):
+        origin = rng.uniform([0.5, 0.5, 0.2], [3.5, 3.5, 0.8])
+        ends = origin + rng.normal(size=(200, 3)) * [1.5, 1.5, 0.3]
+        occ.integrate(origin, ends, rng.random(200) < 0.5)
+        measure.update(ep, float(step))
+        if measure.reached is None:  # once reached, the measure stops counting
+            assert measure.count == np.count_nonzero((occ.state != 0) & observable)
+    assert measure.reached is not None
