@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -12,37 +12,38 @@ import numpy.typing as npt
 from sim.measures.base import EpisodeEnd, EpisodeView, Measure, MetricInfo
 
 
-class PathLength(Measure):
+class _Count(Measure):
+    """A number the loop counts (an attribute of `EpisodeCounters`), reported as it stands at
+    the end of the run."""
+
+    counter: ClassVar[str]
+
+    def result(self, ep: EpisodeView, end: EpisodeEnd, done: Mapping[str, Any]) -> Any:
+        return getattr(ep.counters, self.counter)
+
+
+class PathLength(_Count):
     """Length of the true path flown, metres (summed over physics steps)."""
 
-    name = "path_length"
+    name, counter = "path_length", "path_length_m"
     metrics = (MetricInfo("path_length_m", "path length", unit="m", higher_is_better=False,
                           fmt=".1f"),)
 
-    def result(self, ep: EpisodeView, end: EpisodeEnd, done: Mapping[str, Any]) -> float:
-        return ep.counters.path_length_m
 
-
-class Collisions(Measure):
+class Collisions(_Count):
     """Contacts of the vehicle with the scene (a contact ends the run)."""
 
-    name = "collisions"
+    name, counter = "collisions", "collisions"
     metrics = (MetricInfo("collisions", "collisions", higher_is_better=False, fmt="d",
                           aggregate="sum"),)
 
-    def result(self, ep: EpisodeView, end: EpisodeEnd, done: Mapping[str, Any]) -> int:
-        return ep.counters.collisions
 
-
-class SafetyStops(Measure):
+class SafetyStops(_Count):
     """Flights braked because the map found an obstacle by the rest of their path."""
 
-    name = "safety_stops"
+    name, counter = "safety_stops", "safety_stops"
     metrics = (MetricInfo("safety_stops", "safety stops", higher_is_better=False, fmt="d",
                           aggregate="sum"),)
-
-    def result(self, ep: EpisodeView, end: EpisodeEnd, done: Mapping[str, Any]) -> int:
-        return ep.counters.safety_stops
 
 
 @dataclass(frozen=True)
