@@ -126,9 +126,14 @@ def _editable_root(dist: metadata.Distribution) -> Path | None:
     except ValueError:
         return None
     url = info.get("url", "")
-    if not info.get("dir_info", {}).get("editable") or not url.startswith("file:"):
-        return None
-    return Path(unquote(urlparse(url).path)).resolve()
+    if info.get("dir_info", {}).get("editable") and url.startswith("file:"):
+        return Path(unquote(urlparse(url).path)).resolve()
+    # The metadata a source checkout keeps beside its packages (`flybo.egg-info`), found first
+    # when the checkout is the current folder (`python -m flybo` there): the checkout itself.
+    base = Path(str(dist.locate_file(""))).resolve()
+    if (base / "pyproject.toml").is_file() and (base / DISTRIBUTION / "__init__.py").is_file():
+        return base
+    return None
 
 
 def _same(path: Path, digest: str | None) -> bool:

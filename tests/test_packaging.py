@@ -346,3 +346,13 @@ def test_check_names_a_shadowing_folder(
     message = _check(fake_site)
     assert message is not None and str(shadow / "demo_pkg") in message, message
     assert "no installed distribution" in message
+
+
+def test_python_m_flybo_runs_from_the_checkout() -> None:
+    # The checkout's own metadata (flybo.egg-info) is found first from its folder: that is the
+    # project, not a clash.
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run([sys.executable, "-m", "flybo", "presets"], cwd=root,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "default" in done.stdout
