@@ -41,7 +41,8 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install -q -e '.[dev]'
 	touch $(STAMP)
 
-# The embedded service (API, web pages, one worker; SQLite and a local broker under ./data),
+# The embedded service (API, web pages, one worker; SQLite and a local broker under
+# $FLYBO_DATA_DIR, default ~/.local/share/flybo),
 # with a demo user and a short MAZE + Classic job. Stop it with Ctrl-C.
 HOST ?= 127.0.0.1
 PORT ?= 8000
