@@ -1,8 +1,12 @@
 # One image for the API and the workers (see docker-compose.yml).
+# Both run uploaded planners (the API their dry run, the workers their runs) in the sandbox:
+# bubblewrap for the namespaces, and the container's own cgroups, made writable at start by
+# the entry point (worker/sandbox/container_init.py). Without them uploads are refused and
+# runs of uploaded planners fail (docs/sandbox.md).
 FROM python:3.11-slim-bookworm
 RUN apt-get update -qq \
  && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
-      libusb-1.0-0 libgl1 libegl1 libgomp1 curl \
+      libusb-1.0-0 libgl1 libegl1 libgomp1 curl bubblewrap \
  && rm -rf /var/lib/apt/lists/*
 WORKDIR /app
 COPY pyproject.toml README.md ./
@@ -18,4 +22,5 @@ RUN pip install --no-cache-dir -e '.[s3]'
 ENV FLYBO_DATA_DIR=/data FLYBO_CACHE_DIR=/data/cache
 VOLUME /data
 EXPOSE 8000
+ENTRYPOINT ["python", "-m", "worker.sandbox.container_init"]
 CMD ["flybo", "serve", "--host", "0.0.0.0", "--port", "8000", "--workers", "0"]

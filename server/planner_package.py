@@ -61,8 +61,13 @@ class CheckOutcome:
     wall_s: float
 
 
+class CheckUnavailableError(RuntimeError):
+    """The dry run cannot be run: this machine has no sandbox that contains uploaded code.
+    The service's failure, not the upload's (HTTP 503)."""
+
+
 # Runs a checked package's planner for a few simulated seconds in the sandbox
-# (`worker.sandbox.dry_run.dry_run` is one).
+# (`worker.sandbox.dry_run.dry_run` is one); raises `CheckUnavailableError` where it cannot.
 PlannerCheck = Callable[[PlannerPackage], CheckOutcome]
 
 

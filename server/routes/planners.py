@@ -13,7 +13,13 @@ from sqlalchemy.exc import IntegrityError
 from server.catalog import CatalogError, find_planner
 from server.deps import SessionDep, SettingsDep, UserDep
 from server.models import PlannerRow, User
-from server.planner_package import PackageError, PackageLimits, PlannerCheck, load_package
+from server.planner_package import (
+    CheckUnavailableError,
+    PackageError,
+    PackageLimits,
+    PlannerCheck,
+    load_package,
+)
 from server.schemas import PlannerOut
 from server.storage import ArtifactStoreError, settings_store
 
@@ -93,7 +99,10 @@ def upload_planner(
     if dry_run is None:
         raise HTTPException(503, "this service was started without the planner sandbox and "
                                  "cannot check uploaded planners")
-    check = dry_run(package)
+    try:
+        check = dry_run(package)
+    except CheckUnavailableError as exc:
+        raise HTTPException(503, f"uploaded planners cannot be checked here: {exc}") from None
     if not check.passed:
         raise HTTPException(422, f"planner rejected by its dry run: {check.output[-3000:]}")
     version = (session.scalar(select(func.max(PlannerRow.version)).where(

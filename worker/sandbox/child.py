@@ -3,8 +3,11 @@
 Run by `worker.sandbox.proxy` inside the isolation of `worker.sandbox.isolation`:
 ``python -m worker.sandbox.child --fd-in 3 --fd-out 4 --map FILE (--code DIR | --builtin ID)``.
 After loading, an audit hook refuses network, process creation and writes outside the working
-folder, so a planner that tries gets a clear error even where the namespaces are missing. The
-hook is a second layer only: native code (numba, ctypes) can bypass it, the namespaces cannot be.
+folder, so that a planner that tries gets a clear error message. The hook is a diagnostic, not a
+security boundary: native code (numba, ctypes) goes past it, it does not look at reads, it lets
+anything be written under /tmp, and Python code can reach and change its state. What contains
+a planner is the isolation around this process (`worker.sandbox.isolation`); uploaded code runs
+only where that is complete.
 """
 
 from __future__ import annotations
@@ -15,11 +18,15 @@ import os
 import sys
 import time
 import traceback
+from collections.abc import Mapping
 from pathlib import Path
+from types import MappingProxyType
 from typing import IO, Any
 
 WRITABLE_ROOTS = ("/sandbox/work", "/tmp")
-_BLOCKED_EVENTS = {
+# Read-only, and bound into the hook at its definition: turning the messages off takes more
+# than `_BLOCKED_EVENTS.clear()`, though not much more (see the docstring).
+_BLOCKED_EVENTS = MappingProxyType({
     "socket.connect": "network access is not allowed",
     "socket.bind": "network access is not allowed",
     "socket.sendto": "network access is not allowed",
@@ -32,15 +39,17 @@ _BLOCKED_EVENTS = {
     "os.fork": "starting processes is not allowed",
     "os.forkpty": "starting processes is not allowed",
     "os.kill": "signalling processes is not allowed",
-}
+})
 
 
 class SandboxViolation(PermissionError):  # noqa: N818 - reads as what happened
     pass
 
 
-def _audit(event: str, args: tuple[Any, ...]) -> None:
-    reason = _BLOCKED_EVENTS.get(event)
+def _audit(event: str, args: tuple[Any, ...], *,
+           _blocked: Mapping[str, str] = _BLOCKED_EVENTS,
+           _writable: tuple[str, ...] = WRITABLE_ROOTS) -> None:
+    reason = _blocked.get(event)
     if reason is not None:
         raise SandboxViolation(f"sandbox: {reason} ({event})")
     if event == "open" and len(args) >= 2:
@@ -50,7 +59,7 @@ def _audit(event: str, args: tuple[Any, ...]) -> None:
             writing = bool(mode & (os.O_WRONLY | os.O_RDWR | os.O_CREAT | os.O_APPEND))
         if writing and isinstance(path, str | bytes):
             target = os.path.realpath(os.fsdecode(path))
-            if not target.startswith(WRITABLE_ROOTS):
+            if not target.startswith(_writable):
                 raise SandboxViolation(f"sandbox: writing outside the working folder is not "
                                        f"allowed ({target})")
 

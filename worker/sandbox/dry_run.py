@@ -8,7 +8,8 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from server.planner_package import CheckOutcome, PlannerPackage
+from server.planner_package import CheckOutcome, CheckUnavailableError, PlannerPackage
+from worker.sandbox import isolation
 from worker.sandbox.isolation import SandboxLimits
 
 DRY_RUN_SECONDS = 10.0
@@ -30,7 +31,14 @@ def tiny_area() -> tuple[Any, Any]:
 
 
 def dry_run(package: PlannerPackage, *, timeout_s: float = 60.0) -> CheckOutcome:
-    """Run the package's planner in the sandbox on `tiny_area` for `DRY_RUN_SECONDS`."""
+    """Run the package's planner in the sandbox on `tiny_area` for `DRY_RUN_SECONDS`.
+
+    Raises `CheckUnavailableError` where the sandbox cannot contain uploaded code
+    (`isolation.require_full`)."""
+    try:
+        isolation.require_full("the dry run of uploaded planners")
+    except isolation.SandboxUnavailableError as exc:
+        raise CheckUnavailableError(str(exc)) from None
     from sim.config import preset
     from sim.episode import run_episode
     from sim.result import RunStatus

@@ -11,8 +11,12 @@
   an empty environment, a new session; the process dies with the worker.
 - **Limits**: processes (cgroup `pids.max`), memory (cgroup memory limit), CPU seconds, open
   files, file size and core dumps (rlimits).
-Where bubblewrap or namespaces are unavailable, `probe()` says so and the fallback runs the same
-child without them: rlimits plus the child's audit hook (`docs/sandbox.md`).
+Uploaded code runs only where `probe()` finds all of it (`Isolation.full`): `require_full()`
+raises `SandboxUnavailableError` otherwise, so that the upload is refused and the run fails as
+the platform's fault. Only an operator's explicit `FLYBO_SANDBOX_ALLOW_INSECURE=1` lets it run
+without, in the fallback: the same child with rlimits and, if writable, cgroups, and an audit
+hook that is a diagnostic, not a boundary (`docs/sandbox.md`). A failed probe is not cached: the
+next sandbox probes again.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import importlib.util
+import logging
 import os
 import resource
 import shutil
@@ -33,11 +38,29 @@ from functools import lru_cache
 from pathlib import Path
 
 from pydantic import BaseModel, Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+log = logging.getLogger(__name__)
 
 # The packages the planner process imports; nothing else of the project is visible to it.
 VISIBLE_PACKAGES = ("sim", "planners", "areas", "worker")
 HIDDEN_PACKAGES = ("flybo", "server", "web")
 CGROUP_V1 = Path("/sys/fs/cgroup")
+
+
+class SandboxUnavailableError(RuntimeError):
+    """This machine cannot isolate uploaded code (the platform's failure, not the planner's)."""
+
+
+class SandboxPolicy(BaseSettings):
+    """The sandbox's own settings, read like `server.settings.Settings` (`FLYBO_*`)."""
+
+    model_config = SettingsConfigDict(env_prefix="FLYBO_", extra="ignore")
+
+    sandbox_allow_insecure: bool = Field(
+        default=False,
+        description="run uploaded planners even without full isolation (development only: "
+                    "the fallback does not contain hostile code)")
 
 
 class SandboxLimits(BaseModel):
@@ -63,6 +86,13 @@ class Isolation:
     cgroup_memory: Path | None
     notes: list[str] = field(default_factory=list)
 
+    @property
+    def full(self) -> bool:
+        """Bubblewrap with namespaces, and the pids and memory cgroups: what uploaded code
+        needs."""
+        return bool(self.bwrap and self.namespaces and self.cgroup_pids is not None
+                    and self.cgroup_memory is not None)
+
 
 def _cgroup_root(controller: str) -> Path | None:
     for candidate in (CGROUP_V1 / controller / "flybo-sandbox", CGROUP_V1 / "flybo-sandbox"):
@@ -73,13 +103,18 @@ def _cgroup_root(controller: str) -> Path | None:
         limit_file = {"pids": "pids.max", "memory": "memory.limit_in_bytes"}[controller]
         if candidate.parent == CGROUP_V1:  # cgroup v2: one hierarchy
             limit_file = {"pids": "pids.max", "memory": "memory.max"}[controller]
-            with contextlib.suppress(OSError):
-                (candidate / "cgroup.subtree_control").write_text(f"+{controller}")
+            for parent in (CGROUP_V1, candidate):  # the controller must reach our children
+                with contextlib.suppress(OSError):
+                    (parent / "cgroup.subtree_control").write_text(f"+{controller}")
         probe = candidate / f"probe-{uuid.uuid4().hex[:8]}"
         try:
             probe.mkdir()
-            ok = (probe / limit_file).exists()
-            probe.rmdir()
+            try:
+                # Writable, not merely there: a limit that cannot be set is no limit.
+                (probe / limit_file).write_text("64" if controller == "pids" else "268435456")
+                ok = True
+            finally:
+                probe.rmdir()
         except OSError:
             ok = False
         if ok:
@@ -87,19 +122,41 @@ def _cgroup_root(controller: str) -> Path | None:
     return None
 
 
-@lru_cache(maxsize=1)
+# Bubblewrap with the options `command` starts the planner process with.
+_PROBE_ARGS = ("--die-with-parent", "--new-session", "--unshare-all", "--uid", "65534", "--gid",
+               "65534", "--hostname", "sandbox", "--ro-bind", "/", "/", "--proc", "/proc",
+               "--dev", "/dev", "--tmpfs", "/tmp", "--", "true")
+_full_isolation: Isolation | None = None
+
+
 def probe() -> Isolation:
+    """What this machine offers. A full result is kept for the process; anything less is probed
+    again at the next call (a cgroup or namespace setting may be fixed while the worker runs)."""
+    global _full_isolation
+    if _full_isolation is not None:
+        return _full_isolation
+    iso = _probe()
+    if iso.full:
+        _full_isolation = iso
+    return iso
+
+
+def _probe() -> Isolation:
     notes = []
     bwrap = shutil.which("bwrap")
     namespaces = False
     if bwrap is None:
         notes.append("bubblewrap (bwrap) is not installed: no namespaces")
     else:
-        result = subprocess.run([bwrap, "--unshare-all", "--die-with-parent", "--ro-bind", "/",
-                                 "/", "true"], capture_output=True, text=True, timeout=30)
-        namespaces = result.returncode == 0
+        try:
+            result = subprocess.run([bwrap, *_PROBE_ARGS], capture_output=True, text=True,
+                                    timeout=30)
+            namespaces = result.returncode == 0
+            why = result.stderr.strip()
+        except (OSError, subprocess.SubprocessError) as exc:
+            why = str(exc)
         if not namespaces:
-            notes.append(f"bubblewrap cannot create namespaces here: {result.stderr.strip()}")
+            notes.append(f"bubblewrap cannot create namespaces here: {why}")
     pids, memory = _cgroup_root("pids"), _cgroup_root("memory")
     if pids is None:
         notes.append("no writable pids cgroup: the process count is limited by RLIMIT_NPROC "
@@ -107,6 +164,28 @@ def probe() -> Isolation:
     if memory is None:
         notes.append("no writable memory cgroup: memory is limited by RLIMIT_AS")
     return Isolation(bwrap, namespaces, pids, memory, notes)
+
+
+def insecure_allowed() -> bool:
+    """Whether the operator set `FLYBO_SANDBOX_ALLOW_INSECURE`, read at each call."""
+    return SandboxPolicy().sandbox_allow_insecure
+
+
+def require_full(what: str = "uploaded planners") -> Isolation:
+    """The probe's result when it is full; else `SandboxUnavailableError`, unless the operator
+    allowed the insecure fallback, which is then logged at every use."""
+    iso = probe()
+    if iso.full:
+        return iso
+    notes = "; ".join(iso.notes) or "incomplete isolation"
+    if insecure_allowed():
+        log.error("INSECURE: running %s WITHOUT full isolation because "
+                  "FLYBO_SANDBOX_ALLOW_INSECURE is set; hostile code is not contained (%s)",
+                  what, notes)
+        return iso
+    raise SandboxUnavailableError(
+        f"the planner sandbox is not available on this machine ({notes}); {what} run only in "
+        "bubblewrap with namespaces and the pids and memory cgroups (see docs/sandbox.md)")
 
 
 @dataclass

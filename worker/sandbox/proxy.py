@@ -49,7 +49,13 @@ class SandboxError(RuntimeError):
 
 
 class SandboxedPlanner:
-    """Runs `planner.py` from `code` (or built-in planner `builtin`) in a sandbox."""
+    """Runs `planner.py` from `code` (or built-in planner `builtin`) in a sandbox.
+
+    Uploaded code needs full isolation: without it the constructor raises
+    `isolation.SandboxUnavailableError` (not a `SandboxError`: the platform failed, not the
+    planner), unless the operator allowed the insecure fallback. Built-in planners are the
+    project's own code and run in whatever isolation there is.
+    """
 
     def __init__(self, *, code: Path | None = None, builtin: str | None = None,
                  limits: SandboxLimits | None = None) -> None:
@@ -57,7 +63,7 @@ class SandboxedPlanner:
             raise ValueError("give exactly one of code and builtin")
         self.code, self.builtin = code, builtin
         self.limits = limits or SandboxLimits()
-        self.iso = isolation.probe()
+        self.iso = isolation.require_full() if code is not None else isolation.probe()
         self.proc: subprocess.Popen[bytes] | None = None
         self.tmp = Path(tempfile.mkdtemp(prefix="flybo-sbx-"))
         self.shm_dir = Path(tempfile.mkdtemp(prefix="flybo-map-", dir=_shm_root()))
