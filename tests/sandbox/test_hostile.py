@@ -166,3 +166,42 @@ def test_the_worker_runs_the_next_planner_afterwards(tmp_path: Path, isolated: N
     with SandboxedPlanner(code=code) as planner:
         result = run_episode(area, truth, planner, CONFIG, 0, seconds=4.0)
     assert result.status is RunStatus.SUCCEEDED and result.iterations > 0
+
+
+def test_the_area_cannot_be_rebuilt(tmp_path: Path, isolated: None) -> None:
+    # With the area's name and the `areas` package, `areas.registry.load_area(ctx.area)` would
+    # rebuild the exact scene; the planner process has neither.
+    body = """
+found = {'area': self.ctx.area}
+try:
+    import areas.registry
+    found['areas'] = areas.registry.__file__
+except ImportError as exc:
+    found['areas'] = type(exc).__name__
+found['on_path'] = sorted(p for p in sys.path if os.path.isdir(os.path.join(p, 'areas'))
+                          and os.listdir(os.path.join(p, 'areas')))
+raise RuntimeError(repr(found))
+"""
+    reason = _fly(tmp_path, _planner(body))
+    assert "'area': 'hidden'" in reason and "maze" not in reason and "check-room" not in reason
+    assert "'areas': 'ModuleNotFoundError'" in reason and "'on_path': []" in reason
+
+
+def test_the_context_sent_hides_the_area_only() -> None:
+    from dataclasses import replace
+
+    import numpy as np
+
+    from sim.camera import CameraConfig
+    from sim.geometry import Pose
+    from sim.interface import PlannerContext
+    from sim.vehicle import VehicleLimits
+    from worker.sandbox.protocol import decode_context, encode_context
+    from worker.sandbox.proxy import HIDDEN_AREA, hide_area
+
+    ctx = PlannerContext("maze", np.zeros(3), np.ones(3), Pose(np.zeros(3), 0.0),
+                         VehicleLimits(), 0.4, CameraConfig(), np.random.default_rng(3))
+    sent = decode_context(encode_context(hide_area(ctx)))
+    assert sent.area == HIDDEN_AREA and "maze" not in repr(encode_context(hide_area(ctx)))
+    assert sent.rng.random() == replace(ctx, rng=np.random.default_rng(3)).rng.random()
+    assert sent.safety_radius_m == ctx.safety_radius_m and sent.limits == ctx.limits

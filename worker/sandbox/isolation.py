@@ -42,9 +42,10 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 
 log = logging.getLogger(__name__)
 
-# The packages the planner process imports; nothing else of the project is visible to it.
-VISIBLE_PACKAGES = ("sim", "planners", "areas", "worker")
-HIDDEN_PACKAGES = ("flybo", "server", "web")
+# The packages the planner process imports; nothing else of the project is visible to it. Not
+# `areas`: with its generators a planner could rebuild the scene it is asked to explore.
+VISIBLE_PACKAGES = ("sim", "planners", "worker")
+HIDDEN_PACKAGES = ("flybo", "server", "web", "areas")
 CGROUP_V1 = Path("/sys/fs/cgroup")
 
 

@@ -9,6 +9,7 @@ reason for the run's record; the planner's stderr tail goes to the run log only.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import os
 import select
@@ -42,6 +43,16 @@ STDERR_TAIL_BYTES = 4000
 _SIGNALS = {signal.SIGXCPU: "exceeded its CPU time limit",
             signal.SIGXFSZ: "exceeded its file size limit (too much output)",
             signal.SIGSEGV: "crashed (segmentation fault)"}
+
+
+# The area's name as the planner process is told it: the name would let a planner that knows
+# the built-in areas rebuild the exact scene, ground truth included.
+HIDDEN_AREA = "hidden"
+
+
+def hide_area(ctx: PlannerContext) -> PlannerContext:
+    """`ctx` without the area's name, for the planner process."""
+    return dataclasses.replace(ctx, area=HIDDEN_AREA)
 
 
 class SandboxError(RuntimeError):
@@ -208,7 +219,7 @@ class SandboxedPlanner:
             self.shared[1] = view.surface_weight
             self.shared[2] = view.surface_directions
             before = self.cpu_seconds()
-            self._call({"op": "reset", "ctx": encode_context(self._ctx),
+            self._call({"op": "reset", "ctx": encode_context(hide_area(self._ctx)),
                         "grid": {"shape": list(view.shape), "origin": view.origin.tolist(),
                                  "voxel_size": view.voxel_size}}, "reset")
             self.reset_cpu_seconds = self.cpu_seconds() - before
