@@ -206,10 +206,22 @@ def _worker(args: argparse.Namespace) -> None:
     _migrated(_settings())
     from server.queue import QUEUE  # Celery; importing the worker's app configures it
     from worker.celery_app import app
+    from worker.runner import install_record_builder
+
+    # Every run's reproducibility record; the pool's processes inherit it when they fork.
+    install_record_builder(_reproducibility_record)
 
     app.worker_main(["worker", f"--concurrency={args.concurrency}", "--pool=prefork",
                      "-Q", QUEUE, "-n", f"flybo-{os.getpid()}@%h", "--without-gossip",
                      "--without-mingle", f"--loglevel={args.loglevel}"])
+
+
+def _reproducibility_record(**kwargs: Any) -> dict[str, Any]:
+    """`flybo.record.reproducibility_record`, imported on the first run: it loads the simulation
+    stack, which stays out of Celery's parent process."""
+    from flybo.record import reproducibility_record
+
+    return reproducibility_record(**kwargs)
 
 
 def _viewer(args: argparse.Namespace) -> None:

@@ -50,6 +50,10 @@ class RunState(enum.StrEnum):
 
 
 FINAL_STATES = tuple(s.value for s in RunState if s.final)
+# The benchmark version of results stored before runs named theirs (migration 0003), and of a
+# run whose worker could not tell its own.
+LEGACY_VERSION = "legacy"
+UNKNOWN_VERSION = "unknown"
 ACTIVE_STATES = (RunState.QUEUED.value, RunState.RUNNING.value)
 
 
@@ -263,6 +267,14 @@ class RunResult(Base):
     planning_ms_mean: Mapped[float | None] = mapped_column(Float, nullable=True)
     planning_ms_max: Mapped[float | None] = mapped_column(Float, nullable=True)
     wall_seconds: Mapped[float] = mapped_column(Float)
+    # What made the result: the benchmark version (`flybo.versions`; leaderboards never rank
+    # results of different versions together) and the whole reproducibility record
+    # (`flybo/record.py`). Results stored before they were recorded read `LEGACY_VERSION`.
+    benchmark_version: Mapped[str] = mapped_column(String(64), index=True)
+    record: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    # Every number the measures reported (`result.json`'s `metrics`, keyed as
+    # `sim.measures.metric_infos()`); None for legacy results.
+    metrics: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
 
     run: Mapped[Run] = relationship(back_populates="result")
 

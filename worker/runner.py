@@ -8,6 +8,17 @@
   transaction stores results, series and artifact rows and sets the final state, only if the
   claim token still matches. So a run is `succeeded` only with everything stored, and an
   attempt that lost its claim (its worker was presumed dead) stores nothing.
+- **Record**: the result row names the benchmark version the run was made with, its whole
+  reproducibility record (also in `result.json`) and every metric the measures reported. The
+  record is built by `flybo.record.reproducibility_record`, which `flybo worker` installs
+  (`install_record_builder`: this package may not import `flybo`); without it, or when it
+  fails, the row keeps what the worker knows and says what is missing.
+- **Speed**: the machine's speed factor (`sim.reference_speed`) is measured once per worker
+  process, in the background as the process starts (`measure_speed_in_background`, called on
+  Celery's `worker_process_init`), so no run pays for it.
+- **Time limits**: Celery's soft time limit raised inside a planner's `plan` call is the
+  platform's (`run_episode(platform_errors=...)`): the run fails as over its wall-time limit,
+  not as a planner that raised.
 """
 
 from __future__ import annotations
@@ -24,7 +35,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import timedelta
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -34,6 +45,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from server.db import make_engine, make_session_factory
 from server.models import (
+    UNKNOWN_VERSION,
     AreaRow,
     Artifact,
     Base,
@@ -54,6 +66,7 @@ from worker.sandbox.isolation import SandboxLimits
 
 if TYPE_CHECKING:
     from areas import Area
+    from sim.config import EpisodeConfig
     from sim.interface import PlannerLike
     from sim.result import EpisodeResult
 
@@ -74,6 +87,59 @@ def sessions_for(settings: Settings) -> sessionmaker[Session]:
 
 def worker_name() -> str:
     return f"{socket.gethostname()}-{os.getpid()}"
+
+
+# -- the machine's speed factor: measured once per process --------------------------------------
+
+_speed_lock = threading.Lock()
+_speed: list[float | None] = []  # empty until measured; [None] when measuring failed
+
+
+def machine_speed_factor() -> float | None:
+    """This machine's speed over the reference's (`sim.reference_speed.speed_factor`), measured
+    on the first call of the process; a call meanwhile waits for it. None if it could not be
+    measured (the episode then measures it itself, if its preset charges CPU time)."""
+    with _speed_lock:
+        if not _speed:
+            try:
+                from sim.reference_speed import speed_factor  # numba: in the run's process
+
+                _speed.append(float(speed_factor()))
+            except Exception as exc:
+                log.warning("could not measure the machine's speed factor: %s", exc)
+                _speed.append(None)
+        return _speed[0]
+
+
+def measure_speed_in_background() -> threading.Thread:
+    """Start measuring the speed factor (about 2 s) in a thread of this process, so that a
+    worker process is up at once and its first run finds the factor measured (or waits for
+    the rest of the measurement)."""
+    thread = threading.Thread(target=machine_speed_factor, name="speed-factor", daemon=True)
+    thread.start()
+    return thread
+
+
+# -- the reproducibility record ------------------------------------------------------------------
+
+class RecordBuilder(Protocol):
+    """`flybo.record.reproducibility_record`'s signature."""
+
+    def __call__(self, *, area: Area, planner_id: str, planner_config: dict[str, Any],
+                 preset_name: str, preset: EpisodeConfig, seed: int,
+                 speed_factor: float | None,
+                 planner_fingerprint: str | None = None) -> dict[str, Any]: ...
+
+
+_record_builder: list[RecordBuilder] = []
+
+
+def install_record_builder(builder: RecordBuilder | None) -> None:
+    """Build every run's record with `builder` from now on in this process (and in processes
+    forked from it); None: without one (the stored record says it is missing)."""
+    _record_builder.clear()
+    if builder is not None:
+        _record_builder.append(builder)
 
 
 class RunAbortedError(Exception):
@@ -190,6 +256,8 @@ class _RunSpec:
     planner: str
     planner_builtin: bool
     planner_code: str | None  # artifact location of an uploaded planner's code
+    planner_code_hash: str  # an uploaded planner's; "" for a built-in one
+    planner_config: dict[str, Any]  # a built-in planner's default configuration
     preset: str
     seed: int
     seconds: float
@@ -201,8 +269,10 @@ def _spec(factory: sessionmaker[Session], run_id: int) -> _RunSpec:
             select(Run, AreaRow, PlannerRow).join(AreaRow, Run.area_id == AreaRow.id)
             .join(Job, Run.job_id == Job.id).join(PlannerRow, Job.planner_id == PlannerRow.id)
             .where(Run.id == run_id)).one()
+        defaults = planner.config.get("defaults") if planner.builtin else None
         return _RunSpec(area.name, area.stats.get("file"), planner.key, planner.builtin,
-                        planner.config.get("code"), run.preset, run.seed, run.seconds)
+                        planner.config.get("code"), planner.code_hash or "",
+                        dict(defaults or {}), run.preset, run.seed, run.seconds)
 
 
 def _load_area(spec: _RunSpec, store: ArtifactStore, folder: Path) -> Area:
@@ -271,7 +341,9 @@ def _fly_and_store(factory: sessionmaker[Session], settings: Settings, held: Cla
         outcome = result.status.value
         log.info("run %s %s: %s; coverage %.4f, F-score %.4f", held.run_id, outcome,
                  result.reason, result.coverage, result.surface.fscore)
-        files = _write_files(result, tmp)
+        record = build_record(spec, area, result)
+        log.info("run %s: benchmark version %s", held.run_id, record.get("benchmark_version"))
+        files = _write_files(result, tmp, record)
         keys = f"runs/{held.run_id}/attempt-{held.attempt}-{held.token[:8]}"
         run_log.flush()
         stored = {kind: (store.put(f"{keys}/{path.name}", path), ctype)
@@ -306,7 +378,7 @@ def _fly_and_store(factory: sessionmaker[Session], settings: Settings, held: Cla
         factory, held, RunState.FAILED if failed else RunState.SUCCEEDED, wall0,
         kind=FailureKind.PLANNER if failed else None,
         error=result.reason if failed else None,
-        rows=lambda: _result_rows(held.run_id, result, area.plateau_s, stored),
+        rows=lambda: _result_rows(held.run_id, result, area.plateau_s, stored, record),
     )
     return outcome if done else "lost its claim"
 
@@ -342,11 +414,16 @@ def _simulate(spec: _RunSpec, area: Area, tmp: Path, beat: Heartbeat, store: Art
             last_note[0] = t
             log.info("t = %.0f s, explored %.1f m³", t, volume)
 
+    speed = machine_speed_factor()
+
     def fly(planner: PlannerLike) -> EpisodeResult:
+        # Celery's soft time limit, raised inside a `plan` call, is the platform's: it ends the
+        # run through `_fly_and_store`'s handler instead of counting as the planner raising.
         return run_episode(area, truth, planner, preset(spec.preset), spec.seed,
                            planner_name=spec.planner, preset_name=spec.preset,
                            seconds=spec.seconds, recording_path=tmp / RECORDING,
-                           progress=progress)
+                           progress=progress, speed_factor=speed,
+                           platform_errors=(SoftTimeLimitExceeded,))
 
     if spec.planner_builtin and not settings.sandbox_builtin:
         return fly(make(spec.planner))
@@ -375,9 +452,43 @@ CONTENT_TYPES = {"recording": "application/octet-stream", "mesh": "application/o
                  "result": "application/json"}
 
 
-def _write_files(result: EpisodeResult, tmp: Path) -> dict[str, tuple[Path, str]]:
+def _write_files(result: EpisodeResult, tmp: Path,
+                 record: dict[str, Any]) -> dict[str, tuple[Path, str]]:
     return {kind: (path, CONTENT_TYPES[kind])
-            for kind, path in write_result_folder(result, tmp).items()}
+            for kind, path in write_result_folder(result, tmp, record).items()}
+
+
+def build_record(spec: _RunSpec, area: Area, result: EpisodeResult) -> dict[str, Any]:
+    """The run's reproducibility record, by the installed builder; never raises. Without a
+    builder, or when it fails, what the worker knows itself, with the gap in `missing`."""
+    from sim.config import preset  # the simulation stack, see _load_area
+
+    speed = result.charge.get("speed_factor")
+    why = "no record builder is installed in this worker process (`flybo worker` installs it)"
+    if _record_builder:
+        try:
+            return _record_builder[0](
+                area=area, planner_id=spec.planner, planner_config=spec.planner_config,
+                preset_name=spec.preset, preset=preset(spec.preset), seed=spec.seed,
+                speed_factor=speed, planner_fingerprint=spec.planner_code_hash or None)
+        except Exception as exc:
+            log.exception("could not build the reproducibility record")
+            why = f"record: {type(exc).__name__}: {exc}"
+    return {
+        "benchmark_version": None,
+        "preset": {"name": spec.preset},
+        "area": {"name": area.name, "sha256": area.content_hash},
+        "planner": {"id": spec.planner, "code_sha256": spec.planner_code_hash or None},
+        "seed": spec.seed,
+        "machine": {"speed_factor": speed},
+        "missing": [why],
+    }
+
+
+def record_version(record: dict[str, Any]) -> str:
+    """The benchmark version a record names (`UNKNOWN_VERSION` when it names none)."""
+    version = record.get("benchmark_version")
+    return str(version)[:64] if isinstance(version, str) and version else UNKNOWN_VERSION
 
 
 def _f32(values: npt.ArrayLike) -> bytes:
@@ -388,8 +499,22 @@ def _opt(value: float) -> float | None:
     return float(value) if np.isfinite(value) else None
 
 
+def _plain_metrics(metrics: dict[str, Any]) -> dict[str, float | int | None]:
+    """The measures' numbers as JSON keeps them: counts whole, others float, undefined None."""
+    out: dict[str, float | int | None] = {}
+    for key, value in metrics.items():
+        if value is None or isinstance(value, bool):
+            out[key] = None if value is None else int(value)
+        elif isinstance(value, int | np.integer):
+            out[key] = int(value)
+        else:
+            out[key] = _opt(float(value))
+    return out
+
+
 def _result_rows(run_id: int, result: EpisodeResult, plateau_s: float,
-                 stored: dict[str, tuple[StoredArtifact, str]]) -> list[Base]:
+                 stored: dict[str, tuple[StoredArtifact, str]],
+                 record: dict[str, Any]) -> list[Base]:
     from sim.metrics import timing_summary, volumetric_efficiency  # see _load_area
 
     times = np.asarray(result.volume_times)
@@ -414,7 +539,9 @@ def _result_rows(run_id: int, result: EpisodeResult, plateau_s: float,
             planning_ms_median=_opt(timing.get("median", float("nan"))),
             planning_ms_mean=_opt(timing.get("mean", float("nan"))),
             planning_ms_max=_opt(timing.get("max", float("nan"))),
-            wall_seconds=float(result.wall_seconds)),
+            wall_seconds=float(result.wall_seconds),
+            benchmark_version=record_version(record), record=record,
+            metrics=_plain_metrics(result.metrics)),
         MetricSeries(run_id=run_id, time_s=_f32(times), explored_volume_m3=_f32(volume),
                      recall_time_s=_f32(result.recall_times),
                      surface_recall=_f32(result.recall)),

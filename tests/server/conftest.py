@@ -58,6 +58,18 @@ def redis_reason() -> str | None:
     return None
 
 
+@pytest.fixture(scope="session", autouse=True)
+def record_builder() -> Iterator[None]:
+    """Runs flown in this process get their reproducibility record, as `flybo worker` gives
+    them (it installs the builder: `worker` may not import `flybo`)."""
+    from flybo.record import reproducibility_record
+    from worker.runner import install_record_builder
+
+    install_record_builder(reproducibility_record)
+    yield
+    install_record_builder(None)
+
+
 @pytest.fixture(scope="session")
 def postgres_url() -> Iterator[str]:
     """A fresh PostgreSQL database for this test session, dropped at the end."""

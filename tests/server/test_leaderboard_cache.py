@@ -18,14 +18,18 @@ from server.leaderboard import _Gate, build_leaderboard, compute_leaderboard
 from server.middleware import SECURITY_HEADERS
 from server.models import AreaRow, Job, PlannerRow, Run, RunResult, RunState, User
 from server.schemas import Leaderboard
+from tests.web.stored import current_version
 
 URL = "/api/v1/leaderboard"
 
 
 def _add_result(sessions: sessionmaker[Session], planner: str, area: str, seed: int,
                 coverage: float, *, preset: str = "default",
-                status: str = RunState.SUCCEEDED.value) -> None:
-    """One finished run with its result, creating the owner, planner and area when missing."""
+                status: str = RunState.SUCCEEDED.value,
+                benchmark_version: str | None = None) -> None:
+    """One finished run with its result, creating the owner, planner and area when missing;
+    made by `benchmark_version` (this tree's by default)."""
+    benchmark_version = benchmark_version or current_version()
     with sessions() as s, s.begin():
         owner = s.scalar(select(User).where(User.name == "lb-owner"))
         if owner is None:
@@ -59,7 +63,9 @@ def _add_result(sessions: sessionmaker[Session], planner: str, area: str, seed: 
             precision=coverage, recall=coverage, fscore=coverage * 0.9, rmse_m=0.02,
             collisions=0, path_length_m=100.0 + seed, iterations=50 + seed,
             planning_ms_median=3.0, planning_ms_mean=3.5, planning_ms_max=9.0,
-            wall_seconds=10.0))
+            wall_seconds=10.0, benchmark_version=benchmark_version,
+            metrics={"coverage": coverage, "explored_observable_m3": volume,
+                     "time_to_90_coverage_s": None}))
 
 
 @pytest.fixture

@@ -5,6 +5,7 @@ it in real worker processes."""
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 from datetime import timedelta
@@ -13,16 +14,24 @@ from typing import Any
 
 import numpy as np
 import pytest
+from celery.exceptions import SoftTimeLimitExceeded
 from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session, sessionmaker
 
+from flybo.record import reproducibility_record
 from server.db import session_scope
 from server.jobs import create_job
 from server.models import Artifact, MetricSeries, Run, RunResult, RunState, User, utcnow
 from server.schemas import JobCreate
 from server.settings import Settings
 from server.storage import open_store
-from worker.runner import claim, execute_run
+from worker.runner import (
+    claim,
+    execute_run,
+    install_record_builder,
+    machine_speed_factor,
+    measure_speed_in_background,
+)
 
 
 def _job(sessions: sessionmaker[Session], settings: Settings, seconds: float = 8.0,
@@ -72,6 +81,103 @@ def test_a_run_stores_everything_once(sessions: sessionmaker[Session],
         assert hashlib.sha256(data).hexdigest() == artifact.sha256
     assert b"succeeded" in store.open_path(artifacts["log"].location).read_bytes()
     assert _count(sessions, RunResult, run_id) == 1
+    # The record: in the row and in result.json, naming the version the row is filed under.
+    record = result.record
+    assert record is not None and record["benchmark_version"] == result.benchmark_version
+    assert result.benchmark_version not in {"legacy", "unknown"}
+    assert record["seed"] == 0 and record["preset"]["name"] == "default"
+    assert record["planner"]["id"].startswith("classic-v") and record["planner"]["code_sha256"]
+    assert record["area"]["name"] == "maze" and record["area"]["sha256"]
+    assert record["machine"]["speed_factor"] == pytest.approx(machine_speed_factor())
+    stored = json.loads(store.open_path(artifacts["result"].location).read_bytes())
+    assert stored["reproducibility"] == record
+    metrics = result.metrics
+    assert metrics is not None and metrics == stored["metrics"]
+    assert metrics["coverage"] == pytest.approx(result.coverage)
+    assert {"explored_observable_m3", "time_to_90_coverage_s"} <= set(metrics)
+
+
+def test_without_a_record_builder_the_row_keeps_what_the_worker_knows(
+        sessions: sessionmaker[Session], settings: Settings) -> None:
+    (run_id,) = _job(sessions, settings, seconds=4.0)
+    install_record_builder(None)
+    try:
+        assert execute_run(run_id, settings) == "succeeded"
+    finally:
+        install_record_builder(reproducibility_record)
+    with sessions() as s:
+        result = s.get(RunResult, run_id)
+        assert result is not None and result.benchmark_version == "unknown"
+        assert result.record is not None and result.record["seed"] == 0
+        assert result.record["planner"]["id"].startswith("classic-v")
+        assert "no record builder" in result.record["missing"][0]
+        assert result.metrics is not None and "coverage" in result.metrics
+
+
+def test_a_failing_record_builder_does_not_fail_the_run(sessions: sessionmaker[Session],
+                                                         settings: Settings) -> None:
+    (run_id,) = _job(sessions, settings, seconds=4.0)
+
+    def broken(**kwargs: Any) -> dict[str, Any]:
+        raise OSError("disk gone")
+
+    install_record_builder(broken)
+    try:
+        assert execute_run(run_id, settings) == "succeeded"
+    finally:
+        install_record_builder(reproducibility_record)
+    with sessions() as s:
+        result = s.get(RunResult, run_id)
+        assert result is not None and result.benchmark_version == "unknown"
+        assert result.record is not None and "OSError: disk gone" in result.record["missing"][0]
+
+
+def test_the_soft_time_limit_in_a_plan_call_is_the_platforms(
+        sessions: sessionmaker[Session], settings: Settings,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Celery's soft time limit reaching the planner's `plan` ends the run as over its
+    wall-time limit, not as a planner that raised (which would store its metrics)."""
+    import planners.registry
+
+    real_make = planners.registry.make
+
+    def make(planner_id: str, *args: Any, **kwargs: Any) -> Any:
+        planner = real_make(planner_id, *args, **kwargs)
+
+        def plan(*_: Any, **__: Any) -> Any:
+            raise SoftTimeLimitExceeded()
+
+        planner.plan = plan
+        return planner
+
+    monkeypatch.setattr(planners.registry, "make", make)
+    (run_id,) = _job(sessions, settings, seconds=12.0)  # past the 9 s start-up spin
+    assert execute_run(run_id, settings) == "timed out"
+    with sessions() as s:
+        run = s.get(Run, run_id)
+        assert run is not None and run.status == RunState.FAILED.value
+        assert run.error is not None and "wall-time limit" in run.error
+        assert "planner raised" not in run.error
+    assert _count(sessions, RunResult, run_id) == 0
+
+
+def test_the_speed_factor_is_measured_once_per_process(monkeypatch: pytest.MonkeyPatch) -> None:
+    import sim.reference_speed
+    from worker import runner
+
+    calls: list[int] = []
+
+    def measure() -> float:
+        calls.append(1)
+        time.sleep(0.2)
+        return 0.75
+
+    monkeypatch.setattr(runner, "_speed", [])
+    monkeypatch.setattr(sim.reference_speed, "speed_factor", measure)
+    thread = measure_speed_in_background()
+    assert machine_speed_factor() == 0.75  # waits for the measurement under way
+    thread.join(5)
+    assert machine_speed_factor() == 0.75 and calls == [1]
 
 
 def test_cancel_while_running(sessions: sessionmaker[Session], settings: Settings) -> None:

@@ -3,7 +3,9 @@ numbers chosen so that the expected tables, ranks and curves can be worked out b
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from sqlalchemy.orm import Session
@@ -21,6 +23,14 @@ from server.models import (
 )
 
 HOSTILE = "<script>alert('x')</script>"
+
+
+@functools.cache
+def current_version() -> str:
+    """The benchmark version of this tree, read once: the rows and the app agree on it."""
+    from flybo.versions import benchmark_version
+
+    return benchmark_version()
 
 
 def f32(values: Sequence[float]) -> bytes:
@@ -57,9 +67,20 @@ def add_job(session: Session, user: User, planner: PlannerRow, preset: str = "de
 
 def add_run(session: Session, job: Job, area: AreaRow, seed: int, *, coverage: float,
             fscore: float | None, volume: Sequence[float], recall: Sequence[float],
-            status: str = RunState.SUCCEEDED.value, log: str = "") -> Run:
+            status: str = RunState.SUCCEEDED.value, log: str = "",
+            benchmark_version: str | None = None, metrics: dict[str, Any] | None = None,
+            time_to_90: float | None = None) -> Run:
     """A finished run with its result, its series (one volume sample per second, one recall
-    sample per 20 s) and a mesh artifact row."""
+    sample per 20 s) and a mesh artifact row, made by `benchmark_version` (this tree's by
+    default). Its metrics block: `metrics`, else the row's numbers with the explored
+    observable volume equal to the last volume sample and `time_to_90` ('legacy' rows have
+    none)."""
+    version = benchmark_version or current_version()
+    if metrics is None and version != "legacy":
+        metrics = {"coverage": coverage, "explored_observable_m3": float(volume[-1]),
+                   "fscore": fscore, "precision": fscore, "recall": fscore, "rmse_m": 0.02,
+                   "path_length_m": 10.0 + seed, "collisions": 0, "safety_stops": 0,
+                   "iterations": 5 + seed, "time_to_90_coverage_s": time_to_90}
     run = Run(job_id=job.id, area_id=area.id, seed=seed, preset=job.preset,
               seconds=float(len(volume) - 1), status=status, progress=1.0,
               sim_time_s=float(len(volume) - 1), attempts=1, log_tail=log)
@@ -72,7 +93,9 @@ def add_run(session: Session, job: Job, area: AreaRow, seed: int, *, coverage: f
         volumetric_efficiency=volume[-1] / max(run.seconds, 1.0), precision=fscore,
         recall=fscore, fscore=fscore, rmse_m=0.02, collisions=0, path_length_m=10.0 + seed,
         iterations=5 + seed, planning_ms_median=3.0, planning_ms_mean=4.0,
-        planning_ms_max=9.0, wall_seconds=1.0))
+        planning_ms_max=9.0, wall_seconds=1.0, benchmark_version=version, metrics=metrics,
+        record=None if version == "legacy" else {"benchmark_version": version, "seed": seed,
+                                                 "missing": []}))
     session.add(MetricSeries(
         run_id=run.id, time_s=f32(range(len(volume))), explored_volume_m3=f32(volume),
         recall_time_s=f32([20.0 * (i + 1) for i in range(len(recall))]),
