@@ -1,5 +1,6 @@
 """The whole service's web application, as `flybo serve` runs it: the API (`server.app`), the
-web pages mounted on it (`web`), and the sandboxed dry run of uploaded planners (`worker`).
+web pages mounted on it (`web`), the sandboxed dry run of uploaded planners (`worker`), and the
+benchmark version of this code (`flybo.versions`), the one the leaderboard shows by default.
 
 `server` imports neither `web` nor `worker`; this entry point is where the three meet.
 """
@@ -8,6 +9,7 @@ from __future__ import annotations
 
 from fastapi import FastAPI
 
+from flybo.versions import benchmark_version as tree_version
 from server.app import create_app as create_api
 from server.settings import Settings
 from web import install_web
@@ -15,8 +17,10 @@ from worker.sandbox.dry_run import dry_run
 
 
 def create_app(settings: Settings | None = None, *, sweeper: bool = True,
-               sync_areas: bool = True) -> FastAPI:
-    """The API with the website and planner uploads; the flags as in `server.app.create_app`."""
-    app = create_api(settings, sweeper=sweeper, sync_areas=sync_areas, planner_check=dry_run)
+               sync_areas: bool = True, benchmark_version: str | None = None) -> FastAPI:
+    """The API with the website and planner uploads; the flags as in `server.app.create_app`.
+    The current benchmark version is this tree's (computed at start-up) unless given."""
+    app = create_api(settings, sweeper=sweeper, sync_areas=sync_areas, planner_check=dry_run,
+                     benchmark_version=benchmark_version or tree_version)
     install_web(app)
     return app

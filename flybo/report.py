@@ -5,7 +5,9 @@ Two parts: `fetch_report_data` (`flybo.report_data`) reads the API (`/areas`, `/
 `/curves`) through any `httpx.Client`, a test's `TestClient` included; `write_report` turns that
 data into files and touches no network. Tables show what the website shows: per planner and area
 the mean over the succeeded runs with the smallest and largest run; coverage and F-score in %,
-RMSE in cm. The tables are made in `flybo.report_tables`, the figures in `flybo.report_figures`.
+RMSE in cm. A report is of one benchmark version, named in its title (results of different
+versions are never ranked together). The tables are made in `flybo.report_tables`, the figures
+in `flybo.report_figures`.
 """
 
 from __future__ import annotations
@@ -55,10 +57,12 @@ def write_report(data: ReportData, out: Path) -> list[Path]:
     missing); returns the paths written."""
     out.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
-    parts = [f"# FLYBO report, preset `{data.preset}`", ""]
-    if data.source:
-        parts += [f"From {data.source}. Every cell is the mean over the succeeded runs, with "
-                  "the smallest and largest run in brackets.", ""]
+    parts = [f"# FLYBO report, preset `{data.preset}`, benchmark version "
+             f"`{data.benchmark_version}`", ""]
+    source = f"From {data.source}: the" if data.source else "The"
+    parts += [f"{source} results of benchmark version `{data.benchmark_version}` only. Every "
+              "cell is the mean over the succeeded runs, with the smallest and largest run in "
+              "brackets.", ""]
     for table in tables(data):
         path = out / f"{table.name}.csv"
         write_csv(table, path)

@@ -1,22 +1,40 @@
 """The tables of `flybo report`: the paper's Tables 1-4, as CSV and as Markdown.
 
 Tables show what the website shows: per planner and area the mean over the succeeded runs with
-the smallest and largest run; coverage and F-score in %, RMSE in cm.
+the smallest and largest run; coverage and F-score in %, RMSE in cm; and each leaderboard metric
+of the measures that the paper's columns do not show (`Leaderboard.metrics`, such as the time to
+90 % coverage), in its own unit.
 """
 
 from __future__ import annotations
 
 import csv
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from flybo.report_data import ReportData
-from server.schemas import AreaOut, Leaderboard, LeaderboardEntry, Spread
+from server.schemas import AreaOut, Leaderboard, LeaderboardEntry, MetricOut, Spread
 
 Cell = str | int | float | None
 DASH = "–"
+# Leaderboard metrics the paper's columns show already; the others get columns of their own.
+SHOWN_METRICS = frozenset({"coverage", "fscore", "rmse_m"})
+
+
+def extra_metrics(board: Leaderboard) -> list[MetricOut]:
+    return [m for m in board.metrics if m.key not in SHOWN_METRICS]
+
+
+def _label(m: MetricOut) -> str:
+    return f"{m.label} {m.unit}".strip()
+
+
+def _digits(m: MetricOut) -> int:
+    precision = re.search(r"\.(\d+)", m.fmt)
+    return int(precision.group(1)) if precision else 0
 
 
 @dataclass(frozen=True)
@@ -99,6 +117,9 @@ def table2(board: Leaderboard) -> Table:
     header += ["average coverage %", "relative coverage %", "mean coverage rank",
                "mean F-score rank", "pareto"]
     md_header += ["Average", "Relative", "Avg. rank"]
+    extra = extra_metrics(board)
+    header += [f"average {_label(m)}" for m in extra]
+    md_header += [f"Avg. {_label(m)}" for m in extra]
     rows: list[list[Cell]] = []
     md_rows: list[list[str]] = []
     for p in board.overall:
@@ -113,6 +134,8 @@ def table2(board: Leaderboard) -> Table:
                 "yes" if p.pareto else "no"]
         md += [_fmt(p.mean_coverage, 1, 100), _fmt(p.mean_relative_coverage, 1, 100),
                _fmt(p.mean_coverage_rank, 1)]
+        row += [_scaled(p.mean_metrics.get(m.key)) for m in extra]
+        md += [_fmt(p.mean_metrics.get(m.key), _digits(m)) for m in extra]
         rows.append(row)
         md_rows.append(md)
     return Table("table2", "Table 2: coverage per area, % (mean (min–max) over runs); "
@@ -164,6 +187,11 @@ def table4(board: Leaderboard) -> Table:
     md_header = ["Area", "Planner", "Runs", "Iterations", "Planning time, ms",
                  "Path length, m", "Coverage, %", "F-score, %", "Collisions", "Coverage rank",
                  "F-score rank"]
+    extra = extra_metrics(board)
+    for m in extra:
+        header += _spread_header(_label(m))
+        md_header.append(_label(m))
+    empty = Spread(mean=None, min=None, max=None)
     rows: list[list[Cell]] = []
     md_rows: list[list[str]] = []
     for area in board.areas:
@@ -173,12 +201,15 @@ def table4(board: Leaderboard) -> Table:
             rows.append([area, e.planner, e.runs, *_spread_cells(e.iterations),
                          *_spread_cells(e.planning_ms), *_spread_cells(e.path_length_m),
                          *_spread_cells(e.coverage, 100), *_spread_cells(e.fscore, 100),
-                         e.collisions, e.coverage_rank, e.fscore_rank])
+                         e.collisions, e.coverage_rank, e.fscore_rank,
+                         *(c for m in extra for c in _spread_cells(e.metrics.get(m.key, empty)))])
             md_rows.append([area, e.planner, str(e.runs), _spread_text(e.iterations, 0),
                             _spread_text(e.planning_ms, 1), _spread_text(e.path_length_m, 1),
                             _spread_text(e.coverage, 1, 100), _spread_text(e.fscore, 1, 100),
                             str(e.collisions), _fmt(e.coverage_rank, 1),
-                            _fmt(e.fscore_rank, 1)])
+                            _fmt(e.fscore_rank, 1),
+                            *(_spread_text(e.metrics.get(m.key, empty), _digits(m))
+                              for m in extra)])
     return Table("table4", "Table 4: planning per area: iterations, planning time per "
                  "iteration (median of a run), path length (mean (min–max) over runs)",
                  header, rows, md_header, md_rows)

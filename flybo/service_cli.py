@@ -100,6 +100,9 @@ def add_service_commands(sub: Any) -> None:
     client(results)
     results.add_argument("--preset", default="default")
     results.add_argument("--area", default=None)
+    results.add_argument("--benchmark-version", default=None,
+                         help="the benchmark version whose results to rank (default: the "
+                              "service's current one)")
     _add_suite_commands(sub, client)
 
 
@@ -130,6 +133,9 @@ def _add_suite_commands(sub: Any, client: Any) -> None:
     report.add_argument("--out", type=Path, default=Path("report"),
                         help="output folder (default ./report)")
     report.add_argument("--preset", default="default")
+    report.add_argument("--benchmark-version", default=None,
+                        help="the benchmark version whose results to report (default: the "
+                             "service's current one; GET /api/v1/benchmark-versions lists them)")
 
 
 def run_service_command(args: argparse.Namespace) -> None:
@@ -418,9 +424,12 @@ def _wait(args: argparse.Namespace, job_id: int) -> None:
 
 
 def _results(args: argparse.Namespace) -> None:
-    params = {"preset": args.preset, **({"area": args.area} if args.area else {})}
+    params = {"preset": args.preset, **({"area": args.area} if args.area else {}),
+              **({"benchmark_version": args.benchmark_version} if args.benchmark_version
+                 else {})}
     board = _request(args, "GET", "/leaderboard", params=params)
-    print(f"preset {board['preset']}; areas: {', '.join(board['areas']) or 'none yet'}")
+    print(f"preset {board['preset']}, benchmark version {board.get('benchmark_version')}; "
+          f"areas: {', '.join(board['areas']) or 'none yet'}")
     print(f"{'rank':>4}  {'planner':<18} {'areas':>5} {'coverage':>9} {'cov. rank':>9} "
           f"{'F-score':>8}")
     for p in board["overall"]:
@@ -509,11 +518,12 @@ def _report(args: argparse.Namespace) -> None:
 
     try:
         with httpx.Client(base_url=args.server.rstrip("/"), timeout=60.0) as client:
-            data = fetch_report_data(client, args.preset)
+            data = fetch_report_data(client, args.preset, args.benchmark_version)
     except ReportError as exc:
         raise CliError(str(exc)) from None
     written = write_report(data, args.out)
-    print(f"report of preset {args.preset} ({len(data.board.overall)} planner(s), "
+    print(f"report of preset {args.preset}, benchmark version {data.benchmark_version} "
+          f"({len(data.board.overall)} planner(s), "
           f"{len(data.board.areas)} area(s) with results) in {args.out}/:")
     for path in written:
         print(f"  {path.name}")

@@ -2,7 +2,8 @@
 
 At start-up it applies the Alembic migrations, registers the built-in planners and areas, and
 starts the periodic sweep (`server.sweeper`). The service as `flybo serve` runs it, with the web
-pages and the sandboxed dry run of uploaded planners, is composed in `flybo.app`.
+pages, the sandboxed dry run of uploaded planners and the current benchmark version, is composed
+in `flybo.app`.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import contextlib
 import gc
 import logging
 import threading
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 
 import anyio.to_thread
@@ -37,11 +38,14 @@ MAX_CONCURRENT_REQUESTS = 300  # `flybo serve` passes it to uvicorn; beyond it, 
 
 
 def create_app(settings: Settings | None = None, *, sweeper: bool = True,
-               sync_areas: bool = True, planner_check: PlannerCheck | None = None) -> FastAPI:
+               sync_areas: bool = True, planner_check: PlannerCheck | None = None,
+               benchmark_version: str | Callable[[], str] | None = None) -> FastAPI:
     """The API; `sweeper` and `sync_areas` turn off the background work (for tests).
 
     `planner_check` dry-runs an uploaded planner that passed the static checks; without one,
-    planner uploads are refused (503)."""
+    planner uploads are refused (503). `benchmark_version` is the current benchmark version
+    (the leaderboard's default), or a function computing it at start-up; without one, the
+    newest result's version is taken as current (`server.benchmark_versions`)."""
     settings = settings or load_settings()
     engine = make_engine(settings.db_url)
     sessions = make_session_factory(engine)
@@ -58,6 +62,12 @@ def create_app(settings: Settings | None = None, *, sweeper: bool = True,
         await asyncio.to_thread(upgrade, engine)
         with session_scope(sessions) as session:
             await asyncio.to_thread(sync_builtin_planners, session)
+        if callable(benchmark_version):
+            try:
+                app.state.benchmark_version = await asyncio.to_thread(benchmark_version)
+            except Exception:
+                log.exception("could not tell the current benchmark version; the newest "
+                              "result's is taken as current")
         # What start-up built lives as long as the process: keep it out of the cyclic GC, whose
         # full passes over it stall every request under load. Once per process (a test process
         # starts many apps).
@@ -99,6 +109,8 @@ def create_app(settings: Settings | None = None, *, sweeper: bool = True,
     app.state.sessions = sessions
     app.state.read_sessions = read_sessions
     app.state.planner_check = planner_check
+    app.state.benchmark_version = benchmark_version if isinstance(benchmark_version, str) \
+        else None
     app.include_router(health.router)
     for router in (areas.router, planners.router, jobs.router, groups.router, runs.router,
                    leaderboard.router, curves.router):

@@ -1,19 +1,26 @@
 """The leaderboard: per planner and area, mean/min/max over succeeded runs, and ranks.
 
+A board holds the results of one benchmark version only (`server.benchmark_versions`): results
+made by different code are never ranked together.
+
 Ranks follow the paper: per area, planners are ranked by mean coverage and by mean F-score
 (1 is best, ties share the mean rank); the overall table averages them over the areas a planner
-ran. Relative coverage is a run's explored volume at the plateau time over the best mean of any
-planner on that area (`docs/metrics.md`).
+ran. Relative coverage is a run's explored observable volume (the `explored_observable_m3`
+metric) over the best mean of any planner on that area; a legacy result, which has no metrics,
+counts its explored volume at the plateau time (`docs/metrics.md`). Besides these fixed columns
+a board carries every metric the measures flag for the leaderboard (`sim.measures.metric_infos`,
+`leaderboard=True`), mean/min/max per planner and area.
 
-Every API process caches the computed boards per database and (preset, area), with their JSON
-bodies, under the results version of the preset. Every request checks that version (exact: no
-staleness window); concurrent API requests share one check (`_Gate`), so a busy endpoint costs
-one small query per batch of requests and serves stored bytes.
+Every API process caches the computed boards per database and (preset, benchmark version,
+area), with their JSON bodies, under the results version of the preset. Every request checks
+that version (exact: no staleness window); concurrent API requests share one check (`_Gate`),
+so a busy endpoint costs one small query per batch of requests and serves stored bytes.
 """
 
 from __future__ import annotations
 
 import asyncio
+import functools
 import hashlib
 import threading
 import weakref
@@ -28,7 +35,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from server.db import read_only
 from server.models import AreaRow, Job, PlannerRow, Run, RunResult, RunState
-from server.schemas import Leaderboard, LeaderboardEntry, LeaderboardPlanner, Spread
+from server.schemas import Leaderboard, LeaderboardEntry, LeaderboardPlanner, MetricOut, Spread
 
 
 @dataclass
@@ -94,6 +101,10 @@ class Served:
                    + '"')
 
 
+# A board's cache key: (preset, benchmark version, area).
+Key = tuple[str, str, str | None]
+
+
 class _Gate:
     """Exact freshness for concurrent async requests at one query per batch.
 
@@ -106,7 +117,7 @@ class _Gate:
         self.loop: asyncio.AbstractEventLoop | None = None
         self.waiters: list[asyncio.Future[Version]] = []
         self.task: asyncio.Task[None] | None = None
-        self.computing: dict[str | None, asyncio.Lock] = {}
+        self.computing: dict[tuple[str, str | None], asyncio.Lock] = {}
 
     async def version(self, check: Callable[[], Version]) -> Version:
         loop = asyncio.get_running_loop()
@@ -140,17 +151,17 @@ class _Store:
     """The cached leaderboards of one database (one engine's pool)."""
 
     def __init__(self) -> None:
-        self.served: dict[tuple[str, str | None], Served] = {}
+        self.served: dict[Key, Served] = {}
         self.gates: dict[str, _Gate] = {}
         self.reader: Engine | None = None  # for version checks: a bare connection, no session
         self.lock = threading.Lock()
 
-    def get(self, key: tuple[str, str | None], version: Version) -> Served | None:
+    def get(self, key: Key, version: Version) -> Served | None:
         with self.lock:
             hit = self.served.get(key)
         return hit if hit is not None and hit.version == version else None
 
-    def put(self, key: tuple[str, str | None], served: Served) -> None:
+    def put(self, key: Key, served: Served) -> None:
         with self.lock:
             if len(self.served) > _MAX_ENTRIES:
                 self.served.clear()
@@ -171,34 +182,38 @@ def _store(bind: Engine | Connection) -> _Store:
         return store
 
 
-def build_leaderboard(session: Session, preset: str, area: str | None = None) -> Leaderboard:
-    """The leaderboard, recomputed only when the stored results changed (a copy to keep).
+def build_leaderboard(session: Session, preset: str, area: str | None = None, *,
+                      benchmark_version: str) -> Leaderboard:
+    """The leaderboard of `benchmark_version`'s results, recomputed only when the stored
+    results changed (a copy to keep).
 
     The check is one indexed aggregate (count and highest id of finished runs, number of
     planners), so polling clients cost little; every API process keeps its own copy.
     """
-    return _served(session, preset, area).board.model_copy(deep=True)
+    return _served(session, preset, area, benchmark_version).board.model_copy(deep=True)
 
 
-def _served(session: Session, preset: str, area: str | None) -> Served:
+def _served(session: Session, preset: str, area: str | None, benchmark_version: str) -> Served:
     store = _store(session.get_bind())
     version = results_version(session, preset)
-    hit = store.get((preset, area), version)
+    key = (preset, benchmark_version, area)
+    hit = store.get(key, version)
     if hit is not None:
         return hit
-    served = Served.of(version, compute_leaderboard(session, preset, area))
-    store.put((preset, area), served)
+    served = Served.of(version, compute_leaderboard(session, preset, area,
+                                                    benchmark_version=benchmark_version))
+    store.put(key, served)
     return served
 
 
 async def serve_leaderboard(engine: Engine, sessions: sessionmaker[Session], preset: str,
-                            area: str | None = None) -> Served:
-    """The current leaderboard and its body, for the API (`engine` names the database,
-    `sessions` read it). The version check is shared by the requests waiting for it (see
-    `_Gate`), and a stale board is recomputed once, in a thread, however many requests ask for
-    it meanwhile."""
+                            area: str | None = None, *, benchmark_version: str) -> Served:
+    """The current leaderboard of `benchmark_version` and its body, for the API (`engine`
+    names the database, `sessions` read it). The version check is shared by the requests
+    waiting for it (see `_Gate`), and a stale board is recomputed once, in a thread, however
+    many requests ask for it meanwhile."""
     store = _store(engine)
-    key = (preset, area)
+    key = (preset, benchmark_version, area)
     with store.lock:
         gate = store.gates.get(preset)
         if gate is None:
@@ -217,11 +232,11 @@ async def serve_leaderboard(engine: Engine, sessions: sessionmaker[Session], pre
     hit = store.get(key, version)
     if hit is not None:
         return hit
-    lock = gate.computing.get(area)
+    lock = gate.computing.get((benchmark_version, area))
     if lock is None:
         if len(gate.computing) > _MAX_ENTRIES:
             gate.computing.clear()
-        lock = gate.computing[area] = asyncio.Lock()
+        lock = gate.computing[(benchmark_version, area)] = asyncio.Lock()
     async with lock:
         hit = store.get(key, version)
         if hit is not None:
@@ -229,21 +244,61 @@ async def serve_leaderboard(engine: Engine, sessions: sessionmaker[Session], pre
 
         def compute() -> Served:
             with sessions() as session:
-                served = Served.of(version, compute_leaderboard(session, preset, area))
+                served = Served.of(version, compute_leaderboard(
+                    session, preset, area, benchmark_version=benchmark_version))
             store.put(key, served)
             return served
 
         return await asyncio.to_thread(compute)
 
 
-def compute_leaderboard(session: Session, preset: str, area: str | None = None) -> Leaderboard:
+@functools.cache
+def _leaderboard_infos() -> tuple[dict[str, Any], ...]:
+    from sim.measures import metric_infos  # the simulation stack, on use (see server.catalog)
+
+    return tuple({"key": m.key, "label": m.label, "unit": m.unit,
+                  "higher_is_better": m.higher_is_better, "fmt": m.fmt}
+                 for m in metric_infos() if m.leaderboard)
+
+
+def leaderboard_metrics() -> list[MetricOut]:
+    """The metrics the measures flag for the leaderboard, in registry order."""
+    return [MetricOut(**info) for info in _leaderboard_infos()]
+
+
+def metric_value(result: RunResult, key: str) -> float | None:
+    """A result's metric `key`: from its metrics block, or, for a legacy result (no block),
+    the column of that name if it has one."""
+    if result.metrics is not None:
+        value = result.metrics.get(key)
+    else:
+        value = getattr(result, key, None) if key in RunResult.__table__.columns else None
+    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) \
+        else None
+
+
+def _explored(result: RunResult) -> float:
+    """What relative coverage compares: the explored observable volume, or a legacy result's
+    explored volume at the plateau time."""
+    observable = metric_value(result, "explored_observable_m3")
+    return observable if observable is not None else result.volume_at_plateau_m3
+
+
+def _mean(values: Sequence[float | None]) -> float | None:
+    finite = [v for v in values if v is not None]
+    return sum(finite) / len(finite) if finite else None
+
+
+def compute_leaderboard(session: Session, preset: str, area: str | None = None, *,
+                        benchmark_version: str) -> Leaderboard:
     query = (
         select(PlannerRow.name, PlannerRow.version, PlannerRow.builtin, AreaRow.name, RunResult)
         .join(Run, RunResult.run_id == Run.id)
         .join(Job, Run.job_id == Job.id)
         .join(PlannerRow, Job.planner_id == PlannerRow.id)
         .join(AreaRow, Run.area_id == AreaRow.id)
-        .where(Run.status == RunState.SUCCEEDED.value, Run.preset == preset)
+        .where(Run.status == RunState.SUCCEEDED.value, Run.preset == preset,
+               RunResult.benchmark_version == benchmark_version)
     )
     if area is not None:
         query = query.where(AreaRow.name == area)
@@ -255,8 +310,9 @@ def compute_leaderboard(session: Session, preset: str, area: str | None = None) 
     area_names = sorted({row.area for row in rows})
     best_volume: dict[str, float] = {}
     for (_, area_name), members in groups.items():
-        mean = sum(m.result.volume_at_plateau_m3 for m in members) / len(members)
+        mean = sum(_explored(m.result) for m in members) / len(members)
         best_volume[area_name] = max(best_volume.get(area_name, 0.0), mean)
+    metrics = leaderboard_metrics()
 
     entries: list[LeaderboardEntry] = []
     for (planner, area_name), members in sorted(groups.items()):
@@ -265,7 +321,7 @@ def compute_leaderboard(session: Session, preset: str, area: str | None = None) 
         entries.append(LeaderboardEntry(
             planner=planner, builtin=members[0].builtin, area=area_name, runs=len(members),
             coverage=spread([r.coverage for r in results]),
-            relative_coverage=spread([r.volume_at_plateau_m3 / best if best > 0 else 0.0
+            relative_coverage=spread([_explored(r) / best if best > 0 else 0.0
                                       for r in results]),
             fscore=spread([r.fscore for r in results]),
             rmse_m=spread([r.rmse_m for r in results]),
@@ -274,6 +330,7 @@ def compute_leaderboard(session: Session, preset: str, area: str | None = None) 
             planning_ms=spread([r.planning_ms_median for r in results]),
             collisions=sum(r.collisions for r in results),
             coverage_rank=0.0, fscore_rank=None,
+            metrics={m.key: spread([metric_value(r, m.key) for r in results]) for m in metrics},
         ))
     for area_name in area_names:
         here = [e for e in entries if e.area == area_name]
@@ -282,11 +339,13 @@ def compute_leaderboard(session: Session, preset: str, area: str | None = None) 
         for e in here:
             e.coverage_rank = cov[e.planner]
             e.fscore_rank = fs.get(e.planner)
-    return Leaderboard(preset=preset, areas=area_names, overall=_overall(entries),
-                       entries=entries)
+    return Leaderboard(preset=preset, benchmark_version=benchmark_version,
+                       metrics=metrics, areas=area_names,
+                       overall=_overall(entries, metrics), entries=entries)
 
 
-def _overall(entries: list[LeaderboardEntry]) -> list[LeaderboardPlanner]:
+def _overall(entries: list[LeaderboardEntry],
+             metrics: Sequence[MetricOut]) -> list[LeaderboardPlanner]:
     by_planner: dict[str, list[LeaderboardEntry]] = defaultdict(list)
     for e in entries:
         by_planner[e.planner].append(e)
@@ -304,6 +363,7 @@ def _overall(entries: list[LeaderboardEntry]) -> list[LeaderboardPlanner]:
             mean_fscore_rank=sum(franks) / len(franks) if franks else None,
             rank=0,
             mean_rmse_m=sum(rmses) / len(rmses) if rmses else None,
+            mean_metrics={m.key: _mean([e.metrics[m.key].mean for e in mine]) for m in metrics},
         ))
     overall.sort(key=lambda p: (p.mean_coverage_rank, -p.mean_coverage))
     for i, p in enumerate(overall, start=1):

@@ -90,6 +90,8 @@ class JobOut(BaseModel):
 
 
 class ResultOut(BaseModel):
+    benchmark_version: str = Field(description="the benchmark version the run was made with "
+                                   "('legacy': stored before runs named theirs)")
     outcome: str
     reason: str
     simulated_until_s: float
@@ -109,6 +111,13 @@ class ResultOut(BaseModel):
     planning_ms_mean: float | None
     planning_ms_max: float | None
     wall_seconds: float
+    metrics: dict[str, float | int | None] | None = Field(
+        default=None, description="every number the measures reported, by key "
+        "(`result.json`'s `metrics`); null for legacy results")
+    record: dict[str, Any] | None = Field(
+        default=None, description="the reproducibility record (`result.json`'s "
+        "`reproducibility`): benchmark version, code, preset, area, planner, seed, libraries, "
+        "machine, and what could not be recorded (`missing`); null for legacy results")
 
 
 class ArtifactOut(BaseModel):
@@ -155,6 +164,16 @@ class Spread(BaseModel):
     max: float | None
 
 
+class MetricOut(BaseModel):
+    """A metric the leaderboard shows besides its fixed columns (`sim.measures`)."""
+
+    key: str
+    label: str
+    unit: str
+    higher_is_better: bool
+    fmt: str = Field(description="a Python format spec for the value")
+
+
 class LeaderboardEntry(BaseModel):
     planner: str
     builtin: bool
@@ -170,6 +189,9 @@ class LeaderboardEntry(BaseModel):
     collisions: int
     coverage_rank: float
     fscore_rank: float | None
+    metrics: dict[str, Spread] = Field(
+        default_factory=dict, description="each of `Leaderboard.metrics` over the runs "
+        "(a run where it is undefined, such as a coverage never reached, is left out)")
 
 
 class LeaderboardPlanner(BaseModel):
@@ -187,10 +209,17 @@ class LeaderboardPlanner(BaseModel):
     pareto: bool = Field(default=False, description="not dominated in (mean coverage rank, "
                          "mean F-score rank): no planner is at least as good in both and "
                          "better in one")
+    mean_metrics: dict[str, float | None] = Field(
+        default_factory=dict, description="each of `Leaderboard.metrics`: the mean over areas "
+        "of the per-area means (areas where it is undefined left out)")
 
 
 class Leaderboard(BaseModel):
     preset: str
+    benchmark_version: str = Field(description="the one benchmark version whose results "
+                                   "are ranked")
+    metrics: list[MetricOut] = Field(default_factory=list,
+                                     description="the leaderboard metrics of `sim.measures`")
     areas: list[str]
     overall: list[LeaderboardPlanner]
     entries: list[LeaderboardEntry]
@@ -216,6 +245,21 @@ class PlannerCurves(BaseModel):
 
 class Curves(BaseModel):
     preset: str
+    benchmark_version: str
     area: str
     plateau_s: float | None
     planners: list[PlannerCurves]
+
+
+class BenchmarkVersionOut(BaseModel):
+    benchmark_version: str
+    runs: int = Field(description="succeeded runs with results")
+    current: bool = Field(description="the version of this service's code")
+
+
+class BenchmarkVersions(BaseModel):
+    current: str = Field(description="the version of this service's code: the leaderboard's "
+                         "default")
+    preset: str | None = Field(description="the preset the counts are of; null: all presets")
+    versions: list[BenchmarkVersionOut] = Field(
+        description="the versions with results, the newest result's first")

@@ -1,5 +1,6 @@
 """`flybo report` from a real app on a SQLite file holding known results: the files exist, the
-CSVs hold the seeded numbers, the figures are valid PNG and SVG."""
+CSVs hold the seeded numbers, the figures are valid PNG and SVG, and a report is of one
+benchmark version."""
 
 from __future__ import annotations
 
@@ -11,14 +12,14 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
-from flybo.report import fetch_report_data, write_report
-from server.app import create_app
+from flybo.app import create_app
+from flybo.report import ReportError, fetch_report_data, write_report
 from server.db import make_engine, make_session_factory, session_scope
 from server.migrate import upgrade
 from server.models import User
 from server.security import create_token
 from server.settings import Settings
-from tests.web.stored import add_area, add_job, add_planner, add_run
+from tests.web.stored import add_area, add_job, add_planner, add_run, current_version
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -27,7 +28,8 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 def client(tmp_path: Path) -> Iterator[TestClient]:
     """alpha: 2 runs on MAZE (coverage 0.8 and 0.6, F-score 0.5 and 0.7, paths 10 and 11 m);
     beta: 1 run (coverage 0.9, F 0.4); gamma: 1 run (0.5, F 0.3); one failed run of alpha
-    that counts nowhere; an area without results."""
+    that counts nowhere; an area without results; and a legacy run of gamma (coverage 0.95),
+    which only the legacy report counts."""
     settings = Settings(data_dir=tmp_path / "data",
                         database_url=f"sqlite:///{tmp_path / 'flybo.sqlite'}")
     engine = make_engine(settings.db_url)
@@ -47,9 +49,12 @@ def client(tmp_path: Path) -> Iterator[TestClient]:
         add_run(s, add_job(s, alice, beta), maze, 0, coverage=0.9, fscore=0.4,
                 volume=[0, 5, 6], recall=[0.2])
         add_run(s, add_job(s, alice, gamma), maze, 0, coverage=0.5, fscore=0.3,
-                volume=[0, 1, 1], recall=[0.1])
+                volume=[0, 1, 1], recall=[0.1], time_to_90=30.0)
+        add_run(s, add_job(s, alice, gamma), maze, 1, coverage=0.95, fscore=0.9,
+                volume=[0, 8, 9], recall=[0.9], benchmark_version="legacy")
     engine.dispose()
-    with TestClient(create_app(settings, sweeper=False, sync_areas=False)) as test_client:
+    with TestClient(create_app(settings, sweeper=False, sync_areas=False,
+                               benchmark_version=current_version())) as test_client:
         yield test_client
 
 
@@ -98,7 +103,16 @@ def test_report_from_a_real_app(client: TestClient, tmp_path: Path) -> None:
     assert float(timing[0]["iterations min"]) == 5 and float(timing[0]["iterations max"]) == 6
     assert float(timing[0]["planning time ms mean"]) == pytest.approx(3.0)
 
+    # The leaderboard metrics the paper's columns do not show: time to 90 % coverage.
+    gamma = next(r for r in coverage if r["planner"] == "gamma-v1")
+    assert float(gamma["average time to 90 % s"]) == 30.0 and alpha["average time to 90 % s"] == ""
+    timing_gamma = next(r for r in _csv(out / "table4.csv") if r["planner"] == "gamma-v1")
+    assert timing_gamma["runs"] == "1"  # its legacy run is another version's
+    assert float(timing_gamma["time to 90 % s mean"]) == 30.0
+
     markdown = (out / "report.md").read_text()
+    assert markdown.startswith(f"# FLYBO report, preset `default`, benchmark version "
+                               f"`{current_version()}`")
     assert "70.0 (60.0–80.0)" in markdown and "![Figure 4" in markdown
     assert "beta-v1 *" in markdown  # beta is in the Pareto set
 
@@ -106,6 +120,20 @@ def test_report_from_a_real_app(client: TestClient, tmp_path: Path) -> None:
         assert (out / f"{stem}.png").read_bytes().startswith(PNG_SIGNATURE)
         root = ET.parse(out / f"{stem}.svg").getroot()
         assert root.tag.endswith("svg")
+
+
+def test_report_of_another_benchmark_version(client: TestClient, tmp_path: Path) -> None:
+    data = fetch_report_data(client, "default", "legacy")
+    assert data.benchmark_version == "legacy"
+    assert [p.planner for p in data.board.overall] == ["gamma-v1"]
+    assert [(p.planner, p.runs) for p in data.curves["maze"].planners] == [("gamma-v1", 1)]
+    write_report(data, tmp_path / "legacy")
+    coverage = _csv(tmp_path / "legacy" / "table2.csv")
+    assert [(r["planner"], float(r["maze coverage % mean"])) for r in coverage] == [
+        ("gamma-v1", pytest.approx(95.0))]
+    assert "benchmark version `legacy`" in (tmp_path / "legacy" / "report.md").read_text()
+    with pytest.raises(ReportError, match=r"unknown benchmark version '1999\.01-1'; known: "):
+        fetch_report_data(client, "default", "1999.01-1")
 
 
 def test_report_without_results(tmp_path: Path) -> None:

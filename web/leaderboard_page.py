@@ -1,33 +1,64 @@
-"""The front page: the leaderboard of one preset as the paper's Tables 2, 3 and 4, and its plots.
+"""The front page: the leaderboard of one preset and one benchmark version as the paper's Tables
+2, 3 and 4, and its plots.
 
 The tables are rendered here, on the server, so the page paints at once; the figures are drawn
 by `leaderboard.js` from `/api/v1/curves` (Figures 4 and 5) and from the `data-*` ranks of the
-overall table (Figure 6), so they cost no second leaderboard query.
+overall table (Figure 6), so they cost no second leaderboard query. Results of different
+benchmark versions are never ranked together: the page shows the current version's unless a
+link of its version selector (`?benchmark_version=`) asks for another. Besides the paper's
+columns, the tables show each leaderboard metric of the measures (`Leaderboard.metrics`).
 """
 
 from __future__ import annotations
 
+import re
 from typing import Annotated
+from urllib.parse import urlencode
 
-from fastapi import APIRouter, Query
+from fastapi import APIRouter, Query, Request
 from fastapi.responses import HTMLResponse
 from sqlalchemy import select
 
+from server.benchmark_versions import (
+    UnknownBenchmarkVersionError,
+    check_known,
+    current_version,
+    version_counts,
+)
 from server.catalog import preset_names
 from server.deps import SessionDep
 from server.leaderboard import build_leaderboard
 from server.models import Run
-from server.schemas import Leaderboard, LeaderboardEntry, LeaderboardPlanner
-from web.html import DASH, esc, num, options, page, planner_link, spread_td, table, td
+from server.schemas import Leaderboard, LeaderboardEntry, LeaderboardPlanner, MetricOut
+from web.html import DASH, esc, not_found, num, options, page, planner_link, spread_td, table, td
 from web.jobs_page import recent_jobs_table
 
 router = APIRouter(include_in_schema=False)
 RECENT_JOBS = 10
+# Leaderboard metrics the paper's columns already show; the others get columns of their own.
+SHOWN_METRICS = frozenset({"coverage", "fscore", "rmse_m"})
 
 
 def _presets(session: SessionDep) -> list[str]:
     stored = set(session.scalars(select(Run.preset).distinct()))
     return sorted(stored | set(preset_names()))
+
+
+def _extra_metrics(board: Leaderboard) -> list[MetricOut]:
+    return [m for m in board.metrics if m.key not in SHOWN_METRICS]
+
+
+def _digits(fmt: str) -> int:
+    """The decimals of a format spec such as '.3f' (0 for 'd' and the like)."""
+    precision = re.search(r"\.(\d+)", fmt)
+    return int(precision.group(1)) if precision else 0
+
+
+def _metric_header(m: MetricOut, what: str) -> tuple[str, str]:
+    unit = f", {m.unit}" if m.unit else ""
+    better = "lower" if not m.higher_is_better else "higher"
+    return (f"{esc(m.label)}{esc(unit)}", f"{what}; {better} is better; runs where it is "
+                                          "undefined are left out")
 
 
 def _entry_map(board: Leaderboard) -> dict[tuple[str, str], LeaderboardEntry]:
@@ -47,6 +78,9 @@ def _coverage_table(board: Leaderboard) -> str:
                 ("Relative", "mean relative coverage (the paper's: volume at the plateau over "
                              "the best planner's), %"),
                 ("Avg. rank", "mean per-area coverage rank")]
+    extra = _extra_metrics(board)
+    headers += [_metric_header(m, f"mean over areas of the per-area mean {m.label}")
+                for m in extra]
     rows = []
     for p in board.overall:
         cells = [td(str(p.rank), p.rank, "num"), td(planner_link(p.planner, p.builtin), p.planner)]
@@ -56,6 +90,9 @@ def _coverage_table(board: Leaderboard) -> str:
         cells += [td(num(p.mean_coverage, 1, 100), p.mean_coverage, "num"),
                   td(num(p.mean_relative_coverage, 1, 100), p.mean_relative_coverage, "num"),
                   _rank(p.mean_coverage_rank)]
+        for m in extra:
+            value = p.mean_metrics.get(m.key)
+            cells.append(td(num(value, _digits(m.fmt)), value, "num"))
         rows.append(_overall_row(p, cells))
     return table("Table 2: coverage per area, % (mean; min–max over runs)", headers, rows,
                  table_id="coverage-table", empty="No results yet.")
@@ -102,32 +139,65 @@ def _area_table(board: Leaderboard, area: str | None) -> str:
                ("Planning time, ms", "median wall time of a plan call"),
                ("Path length, m", "flown path"), ("Coverage, %", ""), ("F-score, %", ""),
                ("Collisions", "over all runs"), ("Coverage rank", ""), ("F-score rank", "")]
+    extra = _extra_metrics(board)
+    headers += [_metric_header(m, f"{m.label} over the runs") for m in extra]
     rows = [
         "<tr>" + "".join([
             td(planner_link(e.planner, e.builtin), e.planner), td(str(e.runs), e.runs, "num"),
             spread_td(e.iterations, 0), spread_td(e.planning_ms, 1),
             spread_td(e.path_length_m, 1), spread_td(e.coverage, 1, 100),
             spread_td(e.fscore, 1, 100), td(str(e.collisions), e.collisions, "num"),
-            _rank(e.coverage_rank), _rank(e.fscore_rank)]) + "</tr>"
+            _rank(e.coverage_rank), _rank(e.fscore_rank),
+            *(spread_td(e.metrics[m.key], _digits(m.fmt)) if m.key in e.metrics else td(DASH)
+              for m in extra)]) + "</tr>"
         for e in sorted(here, key=lambda e: e.coverage_rank)]
     return table(f"Table 4: planning on {area or DASH} (mean; min–max over runs)", headers, rows,
                  table_id="area-table", empty="No results on this area yet.")
 
 
-def _controls(presets: list[str], preset: str, areas: list[str], area: str | None) -> str:
+def _controls(presets: list[str], preset: str, areas: list[str], area: str | None,
+              version: str | None) -> str:
+    """`version`: the benchmark version shown when it is not the current one (kept by the
+    form)."""
+    keep = ("" if version is None else
+            f"<input type='hidden' name='benchmark_version' value='{esc(version)}'>")
     return (
         "<form class='controls' method='get' action='/' data-autosubmit>"
         f"<label for='preset'>Preset</label><select id='preset' name='preset'>"
         f"{options(presets, preset)}</select>"
         f"<label for='area'>Area for Table 4 and the curves</label><select id='area' "
-        f"name='area'>{options(areas, area)}</select>"
+        f"name='area'>{options(areas, area)}</select>{keep}"
         "<button type='submit'>Show</button></form>")
 
 
-def _figures(preset: str, area: str | None) -> str:
+def _versions(counts: list[tuple[str, int]], current: str, shown: str, preset: str,
+              area: str | None) -> str:
+    """The version selector: a link per benchmark version with results in this preset (and the
+    current and shown ones), each to this page of that version."""
+    runs = dict(counts)
+    names = [current, *(v for v, _ in counts if v != current)]
+    if shown not in names:
+        names.append(shown)
+    items = []
+    for name in names:
+        query = {"preset": preset, **({"area": area} if area else {}),
+                 "benchmark_version": name}
+        here = " aria-current='page'" if name == shown else ""
+        notes = [f"{runs.get(name, 0)} run{'' if runs.get(name, 0) == 1 else 's'}"]
+        if name == current:
+            notes.append("current")
+        items.append(f"<li><a href='/?{esc(urlencode(query))}'{here}>{esc(name)}</a> "
+                     f"<small>{esc(', '.join(notes))}</small></li>")
+    return ("<nav class='versions' aria-label='Benchmark versions' id='benchmark-versions'>"
+            "<p>Benchmark version (results of different versions are never ranked together):"
+            f"</p><ul>{''.join(items)}</ul></nav>")
+
+
+def _figures(preset: str, area: str | None, version: str) -> str:
     if area is None:
         return ""
-    data = f"data-preset='{esc(preset)}' data-area='{esc(area)}'"
+    data = (f"data-preset='{esc(preset)}' data-area='{esc(area)}' "
+            f"data-benchmark-version='{esc(version)}'")
     return (
         "<section aria-labelledby='plots'><h2 id='plots'>Plots</h2><div class='figures'>"
         f"<figure><div class='chart' id='volume-chart' {data} role='img' "
@@ -147,24 +217,39 @@ def _figures(preset: str, area: str | None) -> str:
 
 @router.get("/", response_class=HTMLResponse)
 def leaderboard_page(
+    request: Request,
     session: SessionDep,
     preset: Annotated[str, Query(max_length=32)] = "default",
     area: Annotated[str | None, Query(max_length=40)] = None,
+    benchmark_version: Annotated[str | None, Query(max_length=64)] = None,
 ) -> HTMLResponse:
-    board = build_leaderboard(session, preset)
+    current = current_version(request.app.state, session)
+    version = benchmark_version or current
+    try:
+        check_known(session, version, current)
+    except UnknownBenchmarkVersionError as exc:
+        return not_found(f"No results of benchmark version {version}. Known versions: "
+                         f"{', '.join(exc.known)}.")
+    board = build_leaderboard(session, preset, benchmark_version=version)
     chosen = area if area in board.areas else (board.areas[0] if board.areas else None)
     pareto = ", ".join(p.planner for p in board.overall if p.pareto) or DASH
+    controls = _controls(_presets(session), preset, board.areas, chosen,
+                         None if version == current else version)
     body = (
         "<h1>Leaderboard</h1>"
         f"<p class='lead'>Exploration planners on simulated areas, preset <code>{esc(preset)}"
-        f"</code>. Every figure is the mean over succeeded runs; the small numbers give the "
-        "smallest and largest run. Built-in planners are marked <span class='badge'>baseline"
-        "</span>. Click a column header to sort.</p>"
-        f"{_controls(_presets(session), preset, board.areas, chosen)}"
+        f"</code>, benchmark version <code id='benchmark-version'>{esc(version)}</code>"
+        f"{' (current)' if version == current else ''}. Every figure is the mean over "
+        "succeeded runs; the small numbers give the smallest and largest run. Built-in "
+        "planners are marked <span class='badge'>baseline</span>. Click a column header to "
+        "sort.</p>"
+        f"{_versions(version_counts(session, preset), current, version, preset, chosen)}"
+        f"{controls}"
         f"{_coverage_table(board)}"
         f"<p>Pareto set (coverage rank against F-score rank): <strong id='pareto-set'>"
         f"{esc(pareto)}</strong></p>"
-        f"{_surface_table(board)}{_area_table(board, chosen)}{_figures(preset, chosen)}"
+        f"{_surface_table(board)}{_area_table(board, chosen)}"
+        f"{_figures(preset, chosen, version)}"
         f"<h2>Jobs</h2>{recent_jobs_table(session, RECENT_JOBS)}"
         "<p><a href='/jobs'>All jobs</a></p>")
     return page("Leaderboard", body, scripts=("sort.js", "autosubmit.js", "leaderboard.js"),

@@ -1,17 +1,21 @@
-"""Planner pages: the list, and one planner's description, config, versions and results."""
+"""Planner pages: the list, and one planner's description, config, versions and results (per
+preset and benchmark version: results of different benchmark versions are never ranked
+together)."""
 
 from __future__ import annotations
 
 import json
+from urllib.parse import urlencode
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 from sqlalchemy import select
 
+from server.benchmark_versions import current_version
 from server.catalog import CatalogError, find_planner
 from server.deps import SessionDep
 from server.leaderboard import build_leaderboard
-from server.models import AreaRow, Job, PlannerRow, Run, RunResult, User
+from server.models import AreaRow, Job, PlannerRow, Run, RunResult, RunState, User
 from web.html import (
     DASH,
     esc,
@@ -60,34 +64,44 @@ def _runs_table(session: SessionDep, planner_id: int) -> str:
             td(num(r.fscore if r else None, 1, 100), r.fscore if r else None, "num"),
             td(num(r.rmse_m if r else None, 2, 100), r.rmse_m if r else None, "num"),
             td(num(r.path_length_m if r else None, 1), r.path_length_m if r else None, "num"),
+            td(esc(r.benchmark_version) if r else DASH, r.benchmark_version if r else None),
         ]) + "</tr>")
     return table(f"Runs (newest {MAX_RUNS})", [
         ("Run", ""), ("Job", ""), ("Area", ""), ("Seed", ""), ("Preset", ""), ("Status", ""),
-        ("Coverage, %", ""), ("F-score, %", ""), ("RMSE, cm", ""), ("Path, m", "")],
+        ("Coverage, %", ""), ("F-score, %", ""), ("RMSE, cm", ""), ("Path, m", ""),
+        ("Benchmark version", "the benchmark version the run was made with")],
         rows, table_id="runs-table", empty="No runs yet.")
 
 
-def _results(session: SessionDep, key: str, presets: list[str]) -> str:
+def _results(session: SessionDep, key: str, boards: list[tuple[str, str]],
+             current: str) -> str:
+    """One table per (preset, benchmark version) the planner has succeeded runs in."""
     parts = []
-    for preset in presets:
-        board = build_leaderboard(session, preset)
+    for preset, version in boards:
+        board = build_leaderboard(session, preset, benchmark_version=version)
         mine = [e for e in board.entries if e.planner == key]
         overall = next((p for p in board.overall if p.planner == key), None)
+
+        def link(area: str, preset: str = preset, version: str = version) -> str:
+            query = urlencode({"preset": preset, "area": area, "benchmark_version": version})
+            return f"<a href='/?{esc(query)}'>{esc(area)}</a>"
+
         rows = ["<tr>" + "".join([
-            td(f"<a href='/?preset={esc(preset)}&amp;area={esc(e.area)}'>{esc(e.area)}</a>",
-               e.area), td(str(e.runs), e.runs, "num"), spread_td(e.coverage, 1, 100),
+            td(link(e.area), e.area), td(str(e.runs), e.runs, "num"),
+            spread_td(e.coverage, 1, 100),
             spread_td(e.fscore, 1, 100), spread_td(e.rmse_m, 2, 100),
             td(num(e.coverage_rank, 1), e.coverage_rank, "num"),
             td(num(e.fscore_rank, 1), e.fscore_rank, "num")]) + "</tr>" for e in mine]
         rank = f"overall rank {overall.rank} of {len(board.overall)}" if overall else ""
-        parts.append(table(f"Preset {preset}: {rank}", [
+        label = f"{version} (current)" if version == current else version
+        parts.append(table(f"Preset {preset}, benchmark version {label}: {rank}", [
             ("Area", ""), ("Runs", ""), ("Coverage, %", ""), ("F-score, %", ""),
             ("RMSE, cm", ""), ("Coverage rank", ""), ("F-score rank", "")], rows))
     return "".join(parts) or "<p>No succeeded runs yet.</p>"
 
 
 @router.get("/planners/{name}", response_class=HTMLResponse)
-def planner_page(name: str, session: SessionDep) -> HTMLResponse:
+def planner_page(name: str, request: Request, session: SessionDep) -> HTMLResponse:
     try:
         row = find_planner(session, name)
     except CatalogError:
@@ -98,9 +112,12 @@ def planner_page(name: str, session: SessionDep) -> HTMLResponse:
     links = ", ".join(f"<a href='/planners/{esc(v.key)}'"
                       f"{' aria-current=page' if v.id == row.id else ''}>{esc(v.key)}</a>"
                       for v in versions)
-    presets = sorted(set(session.scalars(
-        select(Run.preset).join(Job, Run.job_id == Job.id)
-        .where(Job.planner_id == row.id).distinct())))
+    current = current_version(request.app.state, session)
+    boards = sorted(set(session.execute(
+        select(Run.preset, RunResult.benchmark_version).join(Job, Run.job_id == Job.id)
+        .join(RunResult, RunResult.run_id == Run.id)
+        .where(Job.planner_id == row.id, Run.status == RunState.SUCCEEDED.value).distinct()
+    ).tuples()), key=lambda pv: (pv[0], pv[1] != current, pv[1]))
     config = json.dumps(row.config.get("defaults", row.config), indent=2, sort_keys=True)
     body = (
         f"<h1>{esc(row.key)}{' <span class=badge>baseline</span>' if row.builtin else ''}</h1>"
@@ -111,6 +128,6 @@ def planner_page(name: str, session: SessionDep) -> HTMLResponse:
         f"<dt>Versions</dt><dd>{links}</dd>"
         f"<dt>Code hash</dt><dd><code>{esc(row.code_hash) or DASH}</code></dd></dl>"
         f"<h2>Configuration (defaults)</h2><pre class='config'>{esc(config)}</pre>"
-        f"<h2>Results</h2>{_results(session, row.key, presets)}"
+        f"<h2>Results</h2>{_results(session, row.key, boards, current)}"
         f"{_runs_table(session, row.id)}")
     return page(row.key, body, scripts=("sort.js",), current="/planners")

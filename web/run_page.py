@@ -1,10 +1,13 @@
-"""Run pages: facts, final metrics, curves, downloads, the log tail (owner only), the replay link.
+"""Run pages: facts, what made the run (its reproducibility record), final metrics, curves,
+downloads, the log tail (owner only), the replay link.
 
 The curves are drawn by `run.js` from `/api/v1/runs/{id}/series`. The log needs the owner's
 token: the page keeps it in the browser's localStorage and sends it only to this site's API.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 from fastapi import APIRouter, HTTPException
 from fastapi.responses import HTMLResponse
@@ -17,6 +20,35 @@ from web.html import DASH, esc, not_found, num, page, planner_link, status_badge
 from web.jobs_page import progress_bar
 
 router = APIRouter(include_in_schema=False)
+
+
+# Metrics of the measures the rows above show already.
+SHOWN_METRICS = frozenset({"coverage", "fscore", "precision", "recall", "rmse_m", "collisions",
+                           "path_length_m", "iterations"})
+
+
+def _other_metrics(r: ResultOut) -> list[tuple[str, str]]:
+    """The rest of the run's metrics block, labelled as the measures label them."""
+    if not r.metrics:
+        return []
+    from sim.measures import metric_infos  # the simulation stack, on use
+
+    infos = {m.key: m for m in metric_infos()}
+    rows = []
+    for key, value in r.metrics.items():
+        if key in SHOWN_METRICS:
+            continue
+        info = infos.get(key)
+        label = f"{info.label}, {info.unit}" if info and info.unit else (info.label if info
+                                                                          else key)
+        if value is None:
+            text = DASH
+        elif info is not None and info.fmt == "d":
+            text = str(int(value))
+        else:
+            text = format(value, info.fmt if info else ".4g")
+        rows.append((label[:1].upper() + label[1:], text))
+    return rows
 
 
 def _metrics(r: ResultOut) -> str:
@@ -39,10 +71,69 @@ def _metrics(r: ResultOut) -> str:
          f"{num(r.planning_ms_median, 1)} / {num(r.planning_ms_mean, 1)} / "
          f"{num(r.planning_ms_max, 1)}"),
         ("Wall time, s", num(r.wall_seconds, 1)),
+        *_other_metrics(r),
     ]
     body = "".join(f"<tr><th scope='row'>{esc(k)}</th><td>{esc(v)}</td></tr>" for k, v in rows)
     return (f"<div class='scroll'><table class='stats' id='metrics'><caption>Final metrics"
             f"</caption><tbody>{body}</tbody></table></div>")
+
+
+def _short(digest: Any) -> str:
+    """A hash as its first 12 digits, the whole of it in the tooltip."""
+    if not isinstance(digest, str) or not digest:
+        return DASH
+    return f"<code title='{esc(digest)}'>{esc(digest[:12])}</code>"
+
+
+def _get(record: dict[str, Any], *keys: str) -> Any:
+    value: Any = record
+    for key in keys:
+        value = value.get(key) if isinstance(value, dict) else None
+    return value
+
+
+def _record(r: ResultOut) -> str:
+    """The reproducibility record: the benchmark version, code, preset, area, planner, seed,
+    libraries and machine, and what could not be recorded."""
+    head = f"<dt>Benchmark version</dt><dd><code id='run-benchmark-version'>" \
+           f"{esc(r.benchmark_version)}</code></dd>"
+    record = r.record
+    if record is None:
+        return (f"<dl class='facts' id='record'>{head}</dl><p>Stored before runs kept their "
+                "reproducibility record.</p>")
+    git = _get(record, "code", "git")
+    commit = _short(_get(git or {}, "commit"))
+    if isinstance(git, dict) and git.get("dirty"):
+        commit += " <small>with uncommitted changes</small>"
+    libraries = record.get("libraries")
+    libs = (", ".join(f"{k} {v if v is not None else DASH}" for k, v in libraries.items())
+            if isinstance(libraries, dict) else DASH)
+    cores = _get(record, "machine", "cores")
+    cpu = esc(_get(record, "machine", "cpu_model") or DASH) + (
+        f" <small>{esc(cores)} cores</small>" if cores else "")
+    speed = _get(record, "machine", "speed_factor")
+    missing = record.get("missing") or []
+    rows = [
+        ("Code", f"{commit} <small>package {esc(_get(record, 'code', 'package_version') or DASH)}"
+                 f", sources {_short(_get(record, 'code', 'sources_sha256'))}</small>"),
+        ("Preset", f"{esc(_get(record, 'preset', 'name') or DASH)} "
+                   f"{_short(_get(record, 'preset', 'sha256'))}"),
+        ("Area", f"{esc(_get(record, 'area', 'name') or DASH)} "
+                 f"{_short(_get(record, 'area', 'sha256'))}"
+                 + (f" <small>{esc(g)}</small>" if (g := _get(record, 'area', 'generator'))
+                    else "")),
+        ("Planner", f"{esc(_get(record, 'planner', 'id') or DASH)} <small>code</small> "
+                    f"{_short(_get(record, 'planner', 'code_sha256'))} <small>config</small> "
+                    f"{_short(_get(record, 'planner', 'config_sha256'))}"),
+        ("Seed", esc(record.get("seed", DASH))),
+        ("Libraries", esc(libs)),
+        ("CPU", cpu),
+        ("Speed factor", num(speed, 3) if isinstance(speed, int | float) else DASH),
+        ("Not recorded", "<ul class='missing'>" + "".join(
+            f"<li>{esc(m)}</li>" for m in missing) + "</ul>" if missing else "nothing"),
+    ]
+    return (f"<dl class='facts' id='record'>{head}"
+            + "".join(f"<dt>{k}</dt><dd>{v}</dd>" for k, v in rows) + "</dl>")
 
 
 def _facts(run: RunOut) -> str:
@@ -115,6 +206,8 @@ def run_page(run_id: str, session: SessionDep) -> HTMLResponse:
         f"{_facts(run)}"
         f"<h2>Curves</h2>{charts}"
         f"<h2>Metrics</h2>{_metrics(run.result) if run.result else '<p>Not finished.</p>'}"
+        f"<h2>Reproducibility</h2>"
+        f"{_record(run.result) if run.result else '<p>Not finished.</p>'}"
         f"<h2>Downloads</h2>{_downloads(run)}"
         f"<h2>Log</h2>{_log_form(run.id)}")
     return page(f"Run {run.id}", body, scripts=("run.js",), charts=True, current="/jobs")

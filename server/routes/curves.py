@@ -3,7 +3,7 @@
 The paper's Figures 4 and 5 draw, per area, one line per planner (the mean over runs) with a
 band from the smallest to the largest run. Runs of one planner may have been asked for different
 lengths: each time point aggregates the runs that reached it, so a band never mixes in a run
-that had already stopped.
+that had already stopped. Like the leaderboard, the curves are of one benchmark version's runs.
 """
 
 from __future__ import annotations
@@ -13,12 +13,13 @@ from typing import Annotated
 
 import numpy as np
 import numpy.typing as npt
-from fastapi import APIRouter, HTTPException, Query
+from fastapi import APIRouter, HTTPException, Query, Request
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from server.benchmark_versions import UnknownBenchmarkVersionError, check_known, current_version
 from server.deps import SessionDep
-from server.models import AreaRow, Job, MetricSeries, PlannerRow, Run, RunState
+from server.models import AreaRow, Job, MetricSeries, PlannerRow, Run, RunResult, RunState
 from server.schemas import Band, Curves, ErrorBody, PlannerCurves
 
 router = APIRouter(tags=["leaderboard"])
@@ -65,15 +66,17 @@ def _grid(runs: list[tuple[Floats, Floats]], max_points: int) -> Floats:
     return longest[picks]
 
 
-def build_curves(session: Session, preset: str, area: str, max_points: int) -> Curves:
+def build_curves(session: Session, preset: str, area: str, max_points: int, *,
+                 benchmark_version: str) -> Curves:
     query = (
         select(PlannerRow.name, PlannerRow.version, PlannerRow.builtin, MetricSeries)
         .join(Run, MetricSeries.run_id == Run.id)
+        .join(RunResult, RunResult.run_id == Run.id)
         .join(Job, Run.job_id == Job.id)
         .join(PlannerRow, Job.planner_id == PlannerRow.id)
         .join(AreaRow, Run.area_id == AreaRow.id)
         .where(Run.status == RunState.SUCCEEDED.value, Run.preset == preset,
-               AreaRow.name == area)
+               AreaRow.name == area, RunResult.benchmark_version == benchmark_version)
     )
     groups: dict[tuple[str, bool], list[MetricSeries]] = defaultdict(list)
     for name, version, builtin, series in session.execute(query):
@@ -89,18 +92,30 @@ def build_curves(session: Session, preset: str, area: str, max_points: int) -> C
             recall_time_s=_times(rgrid), surface_recall=_band(recall, rgrid),
         ))
     plateau = session.scalar(select(AreaRow.plateau_s).where(AreaRow.name == area))
-    return Curves(preset=preset, area=area, plateau_s=plateau, planners=planners)
+    return Curves(preset=preset, benchmark_version=benchmark_version, area=area,
+                  plateau_s=plateau, planners=planners)
 
 
 @router.get("/curves", response_model=Curves, responses={404: {"model": ErrorBody}})
 def curves(
+    request: Request,
     session: SessionDep,
     area: Annotated[str, Query(max_length=40, description="area name, e.g. maze")],
     preset: Annotated[str, Query(max_length=32)] = "default",
     max_points: Annotated[int, Query(ge=10, le=20_000,
                                      description="most points per curve")] = MAX_POINTS,
+    benchmark_version: Annotated[str | None, Query(
+        max_length=64, description="the benchmark version whose runs are drawn; default: the "
+        "current one")] = None,
 ) -> Curves:
-    """Per planner on `area`: explored volume and surface recall over time, mean/min/max."""
+    """Per planner on `area`: explored volume and surface recall over time, mean/min/max, over
+    the runs of one benchmark version."""
     if session.scalar(select(AreaRow.id).where(AreaRow.name == area)) is None:
         raise HTTPException(404, f"no area named {area!r}")
-    return build_curves(session, preset, area, max_points)
+    current = current_version(request.app.state, session)
+    version = benchmark_version or current
+    try:
+        check_known(session, version, current)
+    except UnknownBenchmarkVersionError as exc:
+        raise HTTPException(404, str(exc)) from None
+    return build_curves(session, preset, area, max_points, benchmark_version=version)

@@ -1,4 +1,5 @@
-"""The leaderboard, computed from the stored results.
+"""The leaderboard of one benchmark version, computed from the stored results, and the list of
+the benchmark versions that have results.
 
 Served from the process's cache as stored JSON bytes (see `server.leaderboard`), with a strong
 ETag: a client that sends it back in If-None-Match gets 304 without a body while the results
@@ -7,17 +8,28 @@ are unchanged.
 
 from __future__ import annotations
 
-from typing import Annotated
+import asyncio
+from typing import Annotated, Any
 
-from fastapi import APIRouter, Query, Request, Response
+from fastapi import APIRouter, HTTPException, Query, Request, Response
 from sqlalchemy.orm import Session, sessionmaker
 
+from server.benchmark_versions import (
+    UnknownBenchmarkVersionError,
+    check_known,
+    configured_version,
+    current_version,
+    list_versions,
+)
+from server.deps import SessionDep
 from server.leaderboard import serve_leaderboard
-from server.schemas import Leaderboard
+from server.schemas import BenchmarkVersions, ErrorBody, Leaderboard
 
 router = APIRouter(tags=["leaderboard"])
 # Clients may keep a copy but must revalidate it (cheap: a 304) before using it.
 CACHE_CONTROL = "no-cache"
+VERSION_QUERY = Query(max_length=64, description="the benchmark version whose results are "
+                      "ranked (`/benchmark-versions` lists them); default: the current one")
 
 
 def etag_matches(if_none_match: str | None, etag: str) -> bool:
@@ -32,19 +44,55 @@ def etag_matches(if_none_match: str | None, etag: str) -> bool:
     return False
 
 
+def _in_thread_session(sessions: sessionmaker[Session], fn: Any, *args: Any) -> Any:
+    """`fn(*args, session)` with a session of its own (for a worker thread)."""
+    with sessions() as session:
+        return fn(*args, session)
+
+
 @router.get("/leaderboard", response_model=Leaderboard,
-            responses={304: {"description": "unchanged since the ETag sent in If-None-Match"}})
+            responses={304: {"description": "unchanged since the ETag sent in If-None-Match"},
+                       404: {"model": ErrorBody, "description": "unknown benchmark version"}})
 async def leaderboard(
     request: Request,
     preset: Annotated[str, Query(max_length=32)] = "default",
     area: Annotated[str | None, Query(max_length=40)] = None,
+    benchmark_version: Annotated[str | None, VERSION_QUERY] = None,
 ) -> Response:
+    """The results of one benchmark version, never mixed with another's."""
     # An async endpoint without a session dependency: a cached answer needs no worker thread
     # and no pooled connection of its own (the version check is shared, see serve_leaderboard).
     state = request.app.state
     sessions: sessionmaker[Session] = getattr(state, "read_sessions", state.sessions)
-    served = await serve_leaderboard(state.engine, sessions, preset, area)
+    current = configured_version(state)
+    if current is None:  # an API made without its version: the newest result's
+        current = str(await asyncio.to_thread(_in_thread_session, sessions, current_version,
+                                              state))
+    version = benchmark_version or current
+    served = await serve_leaderboard(state.engine, sessions, preset, area,
+                                     benchmark_version=version)
+    if not served.board.overall and version != current:
+        # Only an empty board can be of a version nobody knows: one more query, then.
+        try:
+            await asyncio.to_thread(_in_thread_session, sessions, _check, version, current)
+        except UnknownBenchmarkVersionError as exc:
+            raise HTTPException(404, str(exc)) from None
     headers = {"ETag": served.etag, "Cache-Control": CACHE_CONTROL}
     if etag_matches(request.headers.get("if-none-match"), served.etag):
         return Response(status_code=304, headers=headers)
     return Response(served.body, media_type="application/json", headers=headers)
+
+
+def _check(version: str, current: str, session: Session) -> None:
+    check_known(session, version, current)
+
+
+@router.get("/benchmark-versions", response_model=BenchmarkVersions)
+def benchmark_versions(
+    request: Request, session: SessionDep,
+    preset: Annotated[str | None, Query(max_length=32, description="count the results of this "
+                                        "preset only")] = None,
+) -> BenchmarkVersions:
+    """The benchmark versions that have results, with their counts, and the current one (the
+    leaderboard's default)."""
+    return list_versions(session, current_version(request.app.state, session), preset)

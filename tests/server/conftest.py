@@ -23,6 +23,7 @@ from server.db import make_engine, make_session_factory, session_scope
 from server.migrate import upgrade
 from server.security import create_token
 from server.settings import Settings
+from tests.web.stored import current_version
 
 POSTGRES_ADMIN_URL = os.environ.get("FLYBO_TEST_POSTGRES_URL",
                                     "postgresql+psycopg://postgres@127.0.0.1:5432/test")
@@ -141,7 +142,9 @@ def tokens(sessions: sessionmaker[Session], settings: Settings) -> Tokens:
 
 @pytest.fixture
 def client(settings: Settings, sessions: sessionmaker[Session]) -> Iterator[TestClient]:
-    app = create_app(settings, sweeper=False, sync_areas=False)
+    # The version the hand-made results of the tests are stored under (`tests.web.stored`).
+    app = create_app(settings, sweeper=False, sync_areas=False,
+                     benchmark_version=current_version())
     with TestClient(app) as test_client:
         yield test_client
 

@@ -12,6 +12,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from server.models import Job, Run
 from server.settings import Settings
+from tests.web.stored import current_version
 
 JOB = {"planner": "classic", "areas": ["maze"], "runs": 2, "seconds": 30, "preset": "default"}
 
@@ -221,7 +222,11 @@ def test_run_log_is_private(client: TestClient, tokens: Any) -> None:
 
 def test_leaderboard_is_empty_without_results(client: TestClient) -> None:
     board = client.get("/api/v1/leaderboard", params={"preset": "default"}).json()
+    assert board.pop("benchmark_version") == current_version()
+    assert "time_to_90_coverage_s" in {m["key"] for m in board.pop("metrics")}
     assert board == {"preset": "default", "areas": [], "overall": [], "entries": []}
+    versions = client.get("/api/v1/benchmark-versions").json()
+    assert versions == {"current": current_version(), "preset": None, "versions": []}
 
 
 def test_front_page_escapes_what_it_shows(client: TestClient, tokens: Any,

@@ -97,6 +97,11 @@ def _check_results(base: str, job: dict[str, Any], logs: Path) -> list[str]:
     for brief in job["runs"]:
         run = httpx.get(f"{base}/api/v1/runs/{brief['id']}").json()
         assert run["result"]["collisions"] == 0 and run["result"]["coverage"] > 0
+        # The worker process (`flybo worker`) recorded what made the run.
+        record = run["result"]["record"]
+        assert record["benchmark_version"] == run["result"]["benchmark_version"] != "unknown"
+        assert record["machine"]["speed_factor"] > 0 and record["seed"] == brief["seed"]
+        assert "time_to_90_coverage_s" in run["result"]["metrics"]
         assert {a["kind"] for a in run["artifacts"]} == {"recording", "mesh", "result"}
         series = httpx.get(f"{base}/api/v1/runs/{brief['id']}/series").json()
         assert len(series["explored_volume_m3"]) == int(run["seconds"]) + 1
@@ -123,6 +128,9 @@ def test_embedded_service(tmp_path: Path) -> None:
         elapsed = time.monotonic() - started
         _check_results(base, job, logs)
         board = httpx.get(f"{base}/api/v1/leaderboard").json()
+        # The API's current version is the workers': the default board holds their runs.
+        first = httpx.get(f"{base}/api/v1/runs/{job['runs'][0]['id']}").json()
+        assert board["benchmark_version"] == first["result"]["benchmark_version"]
         entry = board["entries"][0]
         assert (entry["planner"], entry["area"], entry["runs"]) == ("classic-v1", "maze", 2)
         assert board["overall"][0]["rank"] == 1

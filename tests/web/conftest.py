@@ -28,7 +28,7 @@ from server.migrate import upgrade
 from server.models import User
 from server.security import create_token
 from server.settings import Settings
-from tests.web.stored import HOSTILE, add_area, add_job, add_planner, add_run
+from tests.web.stored import HOSTILE, add_area, add_job, add_planner, add_run, current_version
 
 CHROMIUM = Path("/usr/bin/chromium")
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "web"
@@ -45,7 +45,9 @@ class Site:
 @pytest.fixture
 def site(tmp_path: Path) -> Iterator[Site]:
     """Planners alpha (2 runs), beta (uploaded, hostile description), gamma, and a planner and
-    an area whose names are markup, on MAZE; one failed run that no table may count."""
+    an area whose names are markup, on MAZE; one failed run that no table may count; and a
+    legacy run of gamma (made before results named their benchmark version), which only the
+    legacy board may count."""
     settings = Settings(data_dir=tmp_path / "data",
                         database_url=f"sqlite:///{tmp_path / 'flybo.sqlite'}")
     engine = make_engine(settings.db_url)
@@ -72,12 +74,16 @@ def site(tmp_path: Path) -> Iterator[Site]:
         add_run(s, add_job(s, alice, beta), maze, 0, coverage=0.9, fscore=0.4,
                 volume=[0, 5, 6], recall=[0.2])
         add_run(s, add_job(s, alice, gamma), maze, 0, coverage=0.5, fscore=0.3,
-                volume=[0, 1, 1], recall=[0.1])
+                volume=[0, 1, 1], recall=[0.1], time_to_90=30.0)
+        ids["legacy_run"] = add_run(s, add_job(s, alice, gamma), maze, 1, coverage=0.95,
+                                    fscore=0.95, volume=[0, 8, 9], recall=[0.9],
+                                    benchmark_version="legacy").id
         # In another preset, so that it does not change the ranks of the default one.
         ids["evil_run"] = add_run(s, add_job(s, alice, evil, "exact"), evil_area, 0, coverage=0.5,
                                   fscore=0.3, volume=[0, 1], recall=[0.1]).id
     engine.dispose()
-    app = create_app(settings, sweeper=False, sync_areas=False)
+    app = create_app(settings, sweeper=False, sync_areas=False,
+                     benchmark_version=current_version())
     with TestClient(app) as client:
         yield Site(client, token, ids)
 

@@ -8,7 +8,7 @@ import re
 import pytest
 
 from tests.web.conftest import Site
-from tests.web.stored import HOSTILE
+from tests.web.stored import HOSTILE, current_version
 
 
 def _html(site: Site, path: str, status: int = 200) -> str:
@@ -29,11 +29,13 @@ def _html(site: Site, path: str, status: int = 200) -> str:
 def test_every_page_answers(site: Site) -> None:
     run = site.ids["alpha_run"]
     for path in ["/", "/?preset=default&area=maze", "/?preset=exact", "/?preset=nothing-here",
+                 "/?benchmark_version=legacy", f"/runs/{site.ids['legacy_run']}",
                  "/areas", "/planners", "/planners/alpha", "/planners/beta-v1", "/jobs",
                  "/jobs?offset=50", f"/jobs/{site.ids['alpha_job']}", f"/runs/{run}",
                  f"/runs/{site.ids['evil_run']}"]:
         _html(site, path)
     for path in ["/planners/teleport", "/jobs/99999", "/jobs/abc", "/jobs/1e3", "/runs/0",
+                 "/?benchmark_version=1999.01-1",
                  "/runs/x", "/runs/99999999999999999999", "/areas/atlantis/thumbnail.png"]:
         assert "Not found" in _html(site, path, 404)
     assert site.client.get("/static/vendor/uplot/uPlot.iife.min.js").status_code == 200
@@ -89,6 +91,11 @@ def test_curves_aggregate_runs_of_different_lengths(site: Site) -> None:
     assert set(by) == {"alpha-v1", "beta-v1", "gamma-v1"}
     alpha = by["alpha-v1"]
     assert alpha["runs"] == 2 and alpha["builtin"]  # the failed run is not there
+    assert by["gamma-v1"]["runs"] == 1  # its legacy run is another version's
+    assert body["benchmark_version"] == current_version()
+    legacy = site.client.get("/api/v1/curves", params={"area": "maze",
+                                                       "benchmark_version": "legacy"}).json()
+    assert [(p["planner"], p["runs"]) for p in legacy["planners"]] == [("gamma-v1", 1)]
     assert alpha["time_s"] == [0, 1, 2, 3, 4]
     volume = alpha["explored_volume_m3"]
     # Runs [0,1,2,3,4] and [0,2,4]: both up to 2 s, then only the longer one.
@@ -130,3 +137,69 @@ def test_job_planner_and_areas_pages(site: Site) -> None:
     assert "src='/areas/maze/thumbnail.png'" in areas and "20 × 20 × 2.5" in areas
     jobs = _html(site, "/jobs")
     assert f"href='/jobs/{site.ids['alpha_job']}'" in jobs
+
+
+def test_the_leaderboard_shows_one_benchmark_version(site: Site) -> None:
+    """The default page ranks the current version's results; the selector links to each
+    version, and the legacy page ranks the legacy run alone."""
+    current = current_version()
+    text = _html(site, "/?area=maze")
+    assert f"<code id='benchmark-version'>{current}</code> (current)" in text
+    nav = text[text.index("id='benchmark-versions'"):text.index("</nav>",
+                                                                text.index("id='benchmark-versions'"))]
+    links = re.findall(r"<a href='([^']+)'( aria-current='page')?>([^<]+)</a>", nav)
+    assert [(name, bool(here)) for _, here, name in links] == [(current, True), ("legacy", False)]
+    assert all("benchmark_version=" in href and "preset=default" in href for href, _, _ in links)
+    assert "4 runs, current" in nav and "1 run" in nav
+    # Gamma's legacy run (coverage 0.95) would lead the table if versions were mixed.
+    coverage = text[text.index("id='coverage-table'"):text.index("id='surface-table'")]
+    assert re.findall(r"data-planner='([^']+)'", coverage) == ["beta-v1", "alpha-v1", "gamma-v1"]
+    assert f"data-benchmark-version='{current}'" in text  # the curves of the same version
+
+    legacy = _html(site, "/?benchmark_version=legacy&area=maze")
+    assert "<code id='benchmark-version'>legacy</code>." in legacy
+    coverage = legacy[legacy.index("id='coverage-table'"):legacy.index("id='surface-table'")]
+    assert re.findall(r"data-planner='([^']+)'", coverage) == ["gamma-v1"]
+    assert ">95.0<" in coverage
+    # The form keeps the version it shows when the preset or area changes.
+    assert "<input type='hidden' name='benchmark_version' value='legacy'>" in legacy
+    assert "name='benchmark_version'" not in text
+    assert "data-benchmark-version='legacy'" in legacy
+    missing = _html(site, "/?benchmark_version=1999.01-1", 404)
+    assert "1999.01-1" in missing and "legacy" in missing and current in missing
+
+
+def test_the_leaderboard_shows_the_time_to_90_coverage(site: Site) -> None:
+    """A leaderboard metric of the measures that the paper's columns do not show gets columns
+    of its own: in Table 2 (mean over areas) and Table 4 (over runs)."""
+    text = _html(site, "/?area=maze")
+    coverage = text[text.index("id='coverage-table'"):text.index("id='surface-table'")]
+    assert "time to 90 %, s" in coverage
+    gamma = coverage[coverage.index("data-planner='gamma-v1'"):]
+    gamma = gamma[:gamma.index("</tr>")]
+    assert gamma.endswith("<td data-sort='30' class='num'>30</td>")
+    alpha = coverage[coverage.index("data-planner='alpha-v1'"):]
+    assert alpha[:alpha.index("</tr>")].endswith("<td data-sort='' class='num'>–</td>")
+    table4 = text[text.index("id='area-table'"):]
+    assert "time to 90 %, s" in table4
+    board = site.client.get("/api/v1/leaderboard").json()
+    gamma_entry = next(e for e in board["entries"] if e["planner"] == "gamma-v1")
+    assert gamma_entry["metrics"]["time_to_90_coverage_s"]["mean"] == 30.0
+
+
+def test_the_run_page_shows_the_record(site: Site) -> None:
+    run = site.client.get(f"/api/v1/runs/{site.ids['alpha_run']}").json()
+    result = run["result"]
+    assert result["benchmark_version"] == current_version()
+    assert result["record"]["seed"] == 0 and result["metrics"]["coverage"] == 0.8
+    text = _html(site, f"/runs/{site.ids['alpha_run']}")
+    record = text[text.index("id='record'"):text.index("</dl>", text.index("id='record'"))]
+    assert f"<code id='run-benchmark-version'>{current_version()}</code>" in record
+    for label in ("Code", "Preset", "Area", "Planner", "Seed", "Libraries", "CPU",
+                  "Speed factor", "Not recorded"):
+        assert f"<dt>{label}</dt>" in record, label
+    legacy = _html(site, f"/runs/{site.ids['legacy_run']}")
+    assert "<code id='run-benchmark-version'>legacy</code>" in legacy
+    assert "Stored before runs kept their reproducibility record." in legacy
+    assert site.client.get(f"/api/v1/runs/{site.ids['legacy_run']}").json()["result"][
+        "record"] is None

@@ -1,5 +1,5 @@
 // The leaderboard's figures: explored volume and surface recall over time on the chosen area
-// (the paper's Figures 4 and 5) from /api/v1/curves, and coverage rank against F-score rank
+// (the paper's Figures 4 and 5) from /api/v1/curves (of the page's benchmark version), and coverage rank against F-score rank
 // with the Pareto set (Figure 6) from the ranks in Table 2's rows.
 "use strict";
 (function () {
@@ -10,7 +10,8 @@
 
   async function curves() {
     if (!volumeEl) return;
-    const query = new URLSearchParams({ preset: volumeEl.dataset.preset, area: volumeEl.dataset.area });
+    const query = new URLSearchParams({ preset: volumeEl.dataset.preset, area: volumeEl.dataset.area,
+                                        benchmark_version: volumeEl.dataset.benchmarkVersion });
     try {
       const body = await C.getJSON(`/api/v1/curves?${query}`);
       const pick = (key, timeKey, scale) => body.planners.map((p) => ({
