@@ -5,14 +5,17 @@ from __future__ import annotations
 
 import os
 import textwrap
+import threading
+import time
 from pathlib import Path
 
 import pytest
 
+from server.planner_package import load_package
 from sim.config import preset
 from sim.episode import run_episode
 from sim.result import RunStatus
-from worker.sandbox.dry_run import tiny_area
+from worker.sandbox.dry_run import dry_run, tiny_area
 from worker.sandbox.isolation import SandboxLimits, probe
 from worker.sandbox.proxy import SandboxedPlanner, SandboxError
 
@@ -205,3 +208,59 @@ def test_the_context_sent_hides_the_area_only() -> None:
     assert sent.area == HIDDEN_AREA and "maze" not in repr(encode_context(hide_area(ctx)))
     assert sent.rng.random() == replace(ctx, rng=np.random.default_rng(3)).rng.random()
     assert sent.safety_radius_m == ctx.safety_radius_m and sent.limits == ctx.limits
+
+
+# Reopens its input pipe for writing (through libc: the audit hook is no boundary), fills it,
+# and points the planner process's reader at a pipe nobody writes to: it never reads again.
+STOPS_READING = """
+if not hasattr(self, 'kept'):
+    fd_in = int(sys.argv[sys.argv.index('--fd-in') + 1])
+    libc = ctypes.CDLL(None, use_errno=True)
+    writer = libc.open(f'/proc/self/fd/{fd_in}'.encode(), os.O_WRONLY | os.O_NONBLOCK)
+    if writer < 0:
+        raise OSError(ctypes.get_errno(), 'cannot reopen the input pipe')
+    for chunk in (b'x' * 4096, b'x'):
+        try:
+            while True:
+                os.write(writer, chunk)
+        except BlockingIOError:
+            pass
+    idle = os.pipe()
+    self.kept = (os.dup(fd_in), writer, *idle)
+    os.dup2(idle[0], fd_in)
+return Plan(np.array([[*obs.pose.position, obs.pose.yaw + 0.5]]))
+"""
+
+
+def test_a_planner_that_fills_its_input_and_stops_reading_fails_its_call(
+        tmp_path: Path, isolated: None) -> None:
+    outcome: dict[str, str] = {}
+    flight = threading.Thread(target=lambda: outcome.update(reason=_fly(
+        tmp_path, _planner(STOPS_READING), seconds=30.0)), daemon=True)
+    started = time.monotonic()
+    flight.start()
+    flight.join(timeout=120)
+    assert not flight.is_alive(), "the runner hangs on the planner's full input pipe"
+    assert "stopped reading its input" in outcome["reason"], outcome
+    assert time.monotonic() - started < 60
+
+
+def test_the_dry_run_has_a_wall_clock_limit(isolated: None) -> None:
+    # Each part is within its own limit (the start, each call, the planning budget), the
+    # whole is not: the dry run's clock ends it.
+    source = HEADER + textwrap.dedent("""
+        import time
+        time.sleep(3)
+
+        class Slow(Planner):
+            def plan(self, obs):
+                time.sleep(1.4)
+                # A small turn and no horizon: many plans to fly the dry run's seconds.
+                return Plan(np.array([[*obs.pose.position, obs.pose.yaw + 0.05]]),
+                            horizon_s=0.0)
+    """)
+    tiny_area()  # built before the clock starts
+    outcome = dry_run(load_package("planner.py", source.encode()), timeout_s=8.0)
+    assert not outcome.passed
+    assert "the dry run took longer than 8 s" in outcome.output, outcome.output
+    assert outcome.wall_s < 10.0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import tempfile
+import threading
 import time
 from functools import lru_cache
 from pathlib import Path
@@ -46,11 +47,21 @@ def dry_run(package: PlannerPackage, *, timeout_s: float = 60.0) -> CheckOutcome
 
     area, truth = tiny_area()
     started = time.monotonic()
-    limits = SandboxLimits(start_timeout_s=timeout_s, plan_timeout_s=10.0,
+    limits = SandboxLimits(start_timeout_s=timeout_s, plan_timeout_s=min(10.0, timeout_s),
                            run_planning_budget_s=timeout_s)
     with tempfile.TemporaryDirectory(prefix="flybo-check-") as tmp:
         code = package.extract(Path(tmp) / "code")
-        with SandboxedPlanner(code=code, limits=limits) as planner:
+        try:
+            planner = SandboxedPlanner(code=code, limits=limits)
+        except isolation.SandboxUnavailableError as exc:
+            raise CheckUnavailableError(str(exc)) from None
+        # The per-call limits and the planning budget leave the time between calls and the
+        # start open: the whole dry run gets a wall-clock limit of its own.
+        clock = threading.Timer(timeout_s, planner.kill,
+                                args=(f"the dry run took longer than {timeout_s:g} s",))
+        clock.daemon = True
+        with planner:
+            clock.start()
             try:
                 result = run_episode(area, truth, planner, preset("exact"), 0,
                                      planner_name="check", preset_name="exact",
@@ -58,6 +69,8 @@ def dry_run(package: PlannerPackage, *, timeout_s: float = 60.0) -> CheckOutcome
             except SandboxError as exc:
                 return CheckOutcome(False, f"{exc}\n{planner.stderr_tail()}".strip(),
                                     time.monotonic() - started)
+            finally:
+                clock.cancel()
             output = planner.stderr_tail()
     wall = time.monotonic() - started
     if result.status is RunStatus.FAILED:

@@ -48,11 +48,16 @@ def to_jsonable(value: Any) -> Any:
     return value
 
 
-def write_message(stream: IO[bytes], message: dict[str, Any]) -> None:
+def encode_message(message: dict[str, Any]) -> bytes:
+    """One JSON line; `ProtocolError` when it would exceed `MAX_MESSAGE_BYTES`."""
     data = json.dumps(message, allow_nan=False, separators=(",", ":")).encode() + b"\n"
     if len(data) > MAX_MESSAGE_BYTES:
         raise ProtocolError(f"message of {len(data)} bytes exceeds {MAX_MESSAGE_BYTES}")
-    stream.write(data)
+    return data
+
+
+def write_message(stream: IO[bytes], message: dict[str, Any]) -> None:
+    stream.write(encode_message(message))
     stream.flush()
 
 

@@ -19,6 +19,7 @@ import subprocess
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +35,7 @@ from worker.sandbox.protocol import (
     ProtocolError,
     decode_plan,
     encode_context,
+    encode_message,
     encode_observation,
     parse_message,
 )
@@ -57,6 +59,10 @@ def hide_area(ctx: PlannerContext) -> PlannerContext:
 
 class SandboxError(RuntimeError):
     """The sandboxed planner failed; the message is the reason recorded for the run."""
+
+
+class _StalledError(Exception):
+    """The pipe to the planner process stayed full until the call's deadline."""
 
 
 class SandboxedPlanner:
@@ -95,10 +101,16 @@ class SandboxedPlanner:
         # What the planner process reports of each call: map refresh and planner time, ms.
         self.timings: list[dict[str, float]] = []
         self._buffer = b""
+        self._to: int | None = None  # the pipe to the planner process, non-blocking
+        self._from: int | None = None
+        # Why the process was ended by us (a stalled pipe, the dry run's clock), if it was.
+        self._failure: str | None = None
         # Between plans, a thread sends the map's changes so that the planner process updates
         # its frontiers and clearance while the vehicle flies, as the runner's own trackers do,
-        # instead of inside the timed `plan` call.
-        self._lock = threading.Lock()
+        # instead of inside the timed `plan` call. The lock keeps each message whole and in
+        # order with the map copy it describes; it is taken with the call's deadline, every
+        # write under it has one, and reading the replies does not need it.
+        self._send_lock = threading.Lock()
         self._stop_sync = threading.Event()
         self._sync_thread: threading.Thread | None = None
 
@@ -122,6 +134,11 @@ class SandboxedPlanner:
             for stream in (self.proc.stdin, self.proc.stdout):
                 if stream is not None:
                     stream.close()
+        for fd in (self._to, self._from):
+            if fd is not None:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+        self._to = self._from = None
         if self.cgroups is not None:
             self.cgroups.cleanup()
         self.shared = None
@@ -159,6 +176,8 @@ class SandboxedPlanner:
 
     def _start(self) -> None:
         """Start the planner process and load the planner (not charged to planning time)."""
+        if self._failure is not None:  # killed before it started
+            raise SandboxError(self._failure)
         map_file = self.shm_dir / "map.u8"
         os.chmod(self.shm_dir, 0o755)  # the map file appears here at the first `plan`
         child_map, child_code = isolation.child_paths(self.iso, work=self.work, code=self.code,
@@ -183,8 +202,10 @@ class SandboxedPlanner:
                 preexec_fn=isolation.preexec(self.limits, self.cgroups, self.iso))
         os.close(to_child_r)
         os.close(from_child_w)
-        self._to = os.fdopen(to_child_w, "wb")
-        self._from = from_child_r
+        if self._failure is not None:
+            self._kill()
+        os.set_blocking(to_child_w, False)  # a planner that stops reading cannot block us
+        self._to, self._from = to_child_w, from_child_r
         hello = self._receive(self.limits.start_timeout_s, "start")
         if not hello.get("ok"):
             raise SandboxError(str(hello.get("error", "the planner failed to load"))[:500])
@@ -211,8 +232,7 @@ class SandboxedPlanner:
             box: IndexBox | None = IndexBox.full(shape)
             surface_box: IndexBox | None = box
         else:
-            with self._lock:
-                box, surface_box = self._copy_changes(view)
+            box = surface_box = None  # taken with the send lock, in `_call`
         assert self.shared is not None
         if self._pending_reset:
             self.shared[0] = view.state
@@ -224,12 +244,21 @@ class SandboxedPlanner:
                                  "voxel_size": view.voxel_size}}, "reset")
             self.reset_cpu_seconds = self.cpu_seconds() - before
             self._pending_reset = False
+            message = {"op": "plan", "obs": encode_observation(obs), "box": _box_message(box),
+                       "surface_box": _box_message(surface_box)}
+            reply = self._call(message, "plan")
             self._sync_thread = threading.Thread(target=self._sync_loop, args=(view,),
                                                  name="sandbox-map-sync", daemon=True)
             self._sync_thread.start()
-        reply = self._call({"op": "plan", "obs": encode_observation(obs),
-                            "box": _box_message(box), "surface_box": _box_message(surface_box)},
-                           "plan")
+        else:
+            obs_message = encode_observation(obs)
+
+            def with_changes() -> dict[str, Any]:
+                changed, surface_changed = self._copy_changes(view)
+                return {"op": "plan", "obs": obs_message, "box": _box_message(changed),
+                        "surface_box": _box_message(surface_changed)}
+
+            reply = self._call(with_changes, "plan")
         timing = reply.get("timing_ms")
         if isinstance(timing, dict):
             self.timings.append({k: float(v) for k, v in timing.items()
@@ -240,8 +269,8 @@ class SandboxedPlanner:
             raise SandboxError(f"the planner returned an invalid plan: {exc}") from None
 
     def _copy_changes(self, view: MapView) -> tuple[IndexBox | None, IndexBox | None]:
-        """Copy the voxels changed since the last copy into shared memory (hold the lock):
-        the states' box and the surface layers' box."""
+        """Copy the voxels changed since the last copy into shared memory (hold the send
+        lock): the states' box and the surface layers' box."""
         box = self.subscription.take() if self.subscription is not None else None
         surface = (self.surface_subscription.take() if self.surface_subscription is not None
                    else None)
@@ -255,50 +284,113 @@ class SandboxedPlanner:
         return box, surface
 
     def _sync_loop(self, view: MapView, period_s: float = 0.2) -> None:
-        from worker.sandbox.protocol import write_message
-
         while not self._stop_sync.wait(period_s):
-            with self._lock:
+            if not self._send_lock.acquire(timeout=period_s):
+                continue  # a plan call is sending
+            try:
                 box, surface = self._copy_changes(view)
                 if box is None and surface is None:
                     continue
-                try:
-                    write_message(self._to, {"op": "sync", "box": _box_message(box),
-                                             "surface_box": _box_message(surface)})
-                except (OSError, ValueError):
-                    return  # the process is gone; the next plan call reports why
+                data = encode_message({"op": "sync", "box": _box_message(box),
+                                       "surface_box": _box_message(surface)})
+                self._write(data, time.monotonic() + self.limits.plan_timeout_s)
+            except _StalledError:
+                self._stalled()
+                return  # the next plan call reports it
+            except (OSError, ValueError):
+                return  # the process is gone; the next plan call reports why
+            finally:
+                self._send_lock.release()
 
     # -- the pipe ----------------------------------------------------------------------------
 
-    def _call(self, message: dict[str, Any], what: str) -> dict[str, Any]:
-        from worker.sandbox.protocol import write_message
+    def kill(self, reason: str) -> None:
+        """End the planner process from any thread; the current or next call fails with
+        `reason` (the dry run's wall-clock limit)."""
+        self._failure = self._failure or reason
+        self._kill()
+        if self.cgroups is not None:
+            for path in self.cgroups.paths:
+                for pid in _cgroup_pids(path):
+                    with contextlib.suppress(ProcessLookupError):
+                        os.kill(pid, signal.SIGKILL)
 
+    def _stalled(self) -> None:
+        self.kill(f"the planner process stopped reading its input (the pipe to it stayed full "
+                  f"for {self.limits.plan_timeout_s:g} s)")
+
+    def _write(self, data: bytes, deadline: float) -> None:
+        """Write all of `data` to the non-blocking pipe before `deadline`, else
+        `_StalledError`; `OSError` when the process is gone."""
+        if self._to is None:
+            raise BrokenPipeError("not started")
+        view = memoryview(data)
+        poller = select.poll()
+        poller.register(self._to, select.POLLOUT)
+        while view:
+            try:
+                view = view[os.write(self._to, view):]
+                continue
+            except BlockingIOError:
+                pass
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise _StalledError
+            poller.poll(max(1, int(left * 1000)))
+
+    def _call(self, message: dict[str, Any] | Callable[[], dict[str, Any]],
+              what: str) -> dict[str, Any]:
+        """Send `message` (or what it returns, built under the send lock) and wait for the
+        reply, all within the call's time limit."""
         started = time.monotonic()
-        try:
-            with self._lock:
-                write_message(self._to, message)
-        except (BrokenPipeError, OSError, ValueError):
-            raise SandboxError(self._death_reason(what)) from None
         budget = min(self.limits.plan_timeout_s,
                      self.limits.run_planning_budget_s - self.planning_s)
-        reply = self._receive(max(budget, 0.0), what)
+        if budget <= 0:
+            self._kill()
+            raise SandboxError(f"the planner used up its planning budget of "
+                               f"{self.limits.run_planning_budget_s:g} s for the run")
+        deadline = started + budget
+        if not self._send_lock.acquire(timeout=budget):
+            self._stalled()  # the map thread could not send in all that time
+            raise SandboxError(self._death_reason(what))
+        try:
+            data = encode_message(message() if callable(message) else message)
+            self._write(data, deadline)
+        except _StalledError:
+            self._stalled()
+            raise SandboxError(self._death_reason(what)) from None
+        except (OSError, ValueError):
+            raise SandboxError(self._death_reason(what)) from None
+        finally:
+            self._send_lock.release()
+        reply = self._receive(deadline - time.monotonic(), what, limit=budget,
+                              by_budget=budget < self.limits.plan_timeout_s)
         self.planning_s += time.monotonic() - started
         if not reply.get("ok"):
             raise SandboxError(f"the planner's {what} raised {reply.get('error', '?')}"[:1000])
         return reply
 
-    def _receive(self, timeout: float, what: str) -> dict[str, Any]:
+    def _receive(self, timeout: float, what: str, *, limit: float | None = None,
+                 by_budget: bool = False) -> dict[str, Any]:
+        """The next reply within `timeout` seconds (what is left of the call's `limit`, which
+        is what was left of the run's planning budget when `by_budget`)."""
+        limit = timeout if limit is None else limit
         deadline = time.monotonic() + timeout
+        if self._from is None:
+            raise SandboxError(self._death_reason(what))
+        poller = select.poll()
+        poller.register(self._from, select.POLLIN)
         while b"\n" not in self._buffer:
             left = deadline - time.monotonic()
             if left <= 0:
                 self._kill()
-                if self.planning_s + timeout >= self.limits.run_planning_budget_s:
+                if self._failure is not None:
+                    raise SandboxError(f"{self._failure} during {what}")
+                if by_budget:
                     raise SandboxError(f"the planner used up its planning budget of "
                                        f"{self.limits.run_planning_budget_s:g} s for the run")
-                raise SandboxError(f"the planner's {what} took longer than {timeout:g} s")
-            ready, _, _ = select.select([self._from], [], [], left)
-            if not ready:
+                raise SandboxError(f"the planner's {what} took longer than {limit:g} s")
+            if not poller.poll(max(1, int(left * 1000))):
                 continue
             chunk = os.read(self._from, 1 << 20)
             if not chunk:
@@ -328,6 +420,8 @@ class SandboxedPlanner:
         except subprocess.TimeoutExpired:
             self._kill()
             code = self.proc.returncode
+        if self._failure is not None:
+            return f"{self._failure} during {what}"
         tail = self.stderr_tail().strip().splitlines()[-20:]
         if tail:
             log.warning("planner stderr (last lines):\n%s", "\n".join(tail))
