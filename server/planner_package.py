@@ -3,6 +3,11 @@
 Each refusal raises `PackageError` naming the problem. An accepted upload becomes a normalised
 zip (sorted entries, fixed timestamps) whose SHA-256 is the planner version's code hash.
 
+Compiling hostile source can take a long time and much memory (a 10 KB zip unpacks to 10 MiB of
+Python), so each `.py` file is capped at `PackageLimits.max_source_bytes`, and the compiling and
+parsing happen in a subprocess of this interpreter with CPU-time and memory limits
+(`check_sources`), never in the API's own process.
+
 The API checks uploads with these, the workers read stored packages back with them; the dry
 run that follows the checks needs the sandbox, so the API is handed one (`PlannerCheck`, see
 `server.app.create_app`) rather than importing the workers' code.
@@ -10,10 +15,13 @@ run that follows the checks needs the sandbox, so the API is handed one (`Planne
 
 from __future__ import annotations
 
-import ast
 import hashlib
 import io
+import json
+import os
 import stat
+import subprocess
+import sys
 import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -29,6 +37,14 @@ class PackageLimits(BaseModel):
     max_upload_bytes: int = Field(default=1024 * 1024, gt=0)
     max_unpacked_bytes: int = Field(default=10 * 1024 * 1024, gt=0)
     max_files: int = Field(default=200, gt=0)
+    # Ten times the project's largest module; compiling one this size takes about half a second
+    # of CPU time, all of them about two seconds.
+    max_source_bytes: int = Field(default=256 * 1024, gt=0, description="per .py file")
+    max_total_source_bytes: int = Field(default=1024 * 1024, gt=0, description="all .py files")
+    # The subprocess that compiles and parses the sources.
+    check_cpu_seconds: int = Field(default=5, ge=1)
+    check_memory_bytes: int = Field(default=1024 * 1024 * 1024, ge=64 * 1024 * 1024)
+    check_wall_seconds: float = Field(default=30.0, gt=0)
 
 
 class PackageError(ValueError):
@@ -82,30 +98,99 @@ def _check_name(name: str) -> str:
     return str(path)
 
 
-def _check_source(name: str, data: bytes) -> None:
-    if not name.endswith(".py"):
-        return
+# Run by `check_sources` as `python -I -S -c _CHECKER CPU_SECONDS MEMORY_BYTES`, the sources as
+# JSON on stdin; prints {"error": null} or {"error": "why"}. The standard library only.
+_CHECKER = r"""
+import ast, json, resource, sys
+
+cpu, memory = int(sys.argv[1]), int(sys.argv[2])
+resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu + 1))
+resource.setrlimit(resource.RLIMIT_AS, (memory, memory))
+resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+
+
+def problem(name, text):
     try:
-        compile(data.decode("utf-8"), name, "exec", dont_inherit=True)
-    except UnicodeDecodeError:
-        raise PackageError(f"{name} is not UTF-8 text") from None
+        compile(text, name, "exec", dont_inherit=True)
     except SyntaxError as exc:
-        raise PackageError(f"{name} has a syntax error on line {exc.lineno}: {exc.msg}") from None
+        return f"{name} has a syntax error on line {exc.lineno}: {exc.msg}"
     except ValueError as exc:  # e.g. null bytes
-        raise PackageError(f"{name} is not valid Python source: {exc}") from None
+        return f"{name} is not valid Python source: {exc}"
+    except (MemoryError, RecursionError):
+        return f"{name} is too large or too deeply nested to compile"
+    return None
 
 
-def _check_defines_a_planner(source: bytes) -> None:
-    """planner.py must define a class with a base named like `Planner` (checked statically, so
-    that files that cannot be planners never reach the sandbox)."""
-    tree = ast.parse(source.decode("utf-8"))
-    for node in ast.walk(tree):
+def defines_a_planner(text):
+    for node in ast.walk(ast.parse(text)):
         if isinstance(node, ast.ClassDef):
             for base in node.bases:
                 name = base.attr if isinstance(base, ast.Attribute) else getattr(base, "id", "")
                 if "Planner" in name:
-                    return
-    raise PackageError("planner.py defines no class deriving from planners.api.Planner")
+                    return True
+    return False
+
+
+files = json.load(sys.stdin)
+error = None
+for name, text in files.items():
+    error = problem(name, text)
+    if error:
+        break
+if error is None:
+    try:
+        if not defines_a_planner(files["planner.py"]):
+            error = "planner.py defines no class deriving from planners.api.Planner"
+    except (MemoryError, RecursionError):
+        error = "planner.py is too large or too deeply nested to compile"
+print(json.dumps({"error": error}))
+"""
+
+
+def _decode_source(name: str, data: bytes, limits: PackageLimits) -> str:
+    if len(data) > limits.max_source_bytes:
+        raise PackageError(f"{name} is {len(data)} bytes of source, at most "
+                           f"{limits.max_source_bytes} per file")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise PackageError(f"{name} is not UTF-8 text") from None
+
+
+def check_sources(files: dict[str, bytes], limits: PackageLimits) -> None:
+    """Every `.py` file compiles, and planner.py defines a class with a base named like
+    `Planner` (checked statically, so that files that cannot be planners never reach the
+    sandbox). Compiled in a subprocess with `limits.check_cpu_seconds` of CPU time and
+    `limits.check_memory_bytes` of address space."""
+    sources = {name: _decode_source(name, data, limits) for name, data in files.items()
+               if name.endswith(".py")}
+    total = sum(len(files[name]) for name in sources)
+    if total > limits.max_total_source_bytes:
+        raise PackageError(f"the .py files hold {total} bytes of source, at most "
+                           f"{limits.max_total_source_bytes}")
+    env = {key: os.environ[key] for key in ("PATH", "LD_LIBRARY_PATH", "LANG")
+           if key in os.environ}
+    try:
+        done = subprocess.run(
+            [sys.executable, "-I", "-S", "-B", "-c", _CHECKER, str(limits.check_cpu_seconds),
+             str(limits.check_memory_bytes)],
+            input=json.dumps(sources).encode(), capture_output=True, env=env,
+            timeout=limits.check_wall_seconds)
+    except subprocess.TimeoutExpired:
+        raise PackageError(f"checking the Python sources took more than "
+                           f"{limits.check_wall_seconds:g} s") from None
+    if done.returncode != 0:
+        if done.returncode in (-24, -9):  # SIGXCPU, or SIGKILL past the hard limit
+            raise PackageError(f"checking the Python sources took more than "
+                               f"{limits.check_cpu_seconds} s of CPU time")
+        raise PackageError("the Python sources are too large or complex to check "
+                           f"(the check ended with code {done.returncode})")
+    try:
+        error = json.loads(done.stdout)["error"]
+    except (ValueError, KeyError, TypeError):
+        raise PackageError("the Python sources could not be checked") from None
+    if error is not None:
+        raise PackageError(str(error))
 
 
 def load_package(filename: str, data: bytes, limits: PackageLimits | None = None) -> PlannerPackage:
@@ -125,9 +210,7 @@ def load_package(filename: str, data: bytes, limits: PackageLimits | None = None
                            "a .zip with planner.py at its root")
     if "planner.py" not in files:
         raise PackageError("the archive has no planner.py at its root")
-    for name, content in files.items():
-        _check_source(name, content)
-    _check_defines_a_planner(files["planner.py"])
+    check_sources(files, limits)
     buffer = io.BytesIO()
     with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as out:
         for name in sorted(files):
@@ -174,6 +257,9 @@ def _read_zip(data: bytes, limits: PackageLimits) -> dict[str, bytes]:
 
 def read_stored_package(zip_bytes: bytes) -> PlannerPackage:
     """A package from its stored normalised zip (checked again: stores can be tampered with)."""
+    # Limits as wide as any upload's ever were; the check's CPU and memory limits still hold.
     return load_package("stored.zip", zip_bytes,
                         PackageLimits(max_upload_bytes=64 * 1024 * 1024,
-                                      max_unpacked_bytes=64 * 1024 * 1024, max_files=10_000))
+                                      max_unpacked_bytes=64 * 1024 * 1024, max_files=10_000,
+                                      max_source_bytes=64 * 1024 * 1024,
+                                      max_total_source_bytes=64 * 1024 * 1024))
