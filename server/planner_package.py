@@ -23,6 +23,7 @@ import stat
 import subprocess
 import sys
 import zipfile
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
@@ -87,15 +88,64 @@ class CheckUnavailableError(RuntimeError):
 PlannerCheck = Callable[[PlannerPackage], CheckOutcome]
 
 
-def _check_name(name: str) -> str:
-    if "\\" in name or name.startswith("/") or (len(name) > 1 and name[1] == ":"):
-        raise PackageError(f"absolute or non-POSIX path in the archive: {name!r}")
-    path = PurePosixPath(name)
-    if ".." in path.parts:
-        raise PackageError(f"path leaving the archive ('..') : {name!r}")
-    if path.suffix.lower() in COMPILED_SUFFIXES:
+MAX_NAME_PART_BYTES = 255  # a file or folder name, as file systems allow
+MAX_NAME_BYTES = 1024  # a whole path in the archive
+
+
+def _check_name(raw: str) -> str:
+    """The archive entry's name as stored (`ZipInfo.orig_filename`: `filename` drops what
+    follows a NUL), checked; returns it normalised (no trailing '/')."""
+    shown = repr(raw[:80] + ("..." if len(raw) > 80 else ""))
+    if "\0" in raw:
+        raise PackageError(f"NUL character in an archive name: {shown}")
+    if any(ord(c) < 32 or 127 <= ord(c) < 160 for c in raw):
+        raise PackageError(f"control character in an archive name: {shown}")
+    if "\\" in raw or raw.startswith("/") or (len(raw) > 1 and raw[1] == ":"):
+        raise PackageError(f"absolute or non-POSIX path in the archive: {shown}")
+    parts = raw.removesuffix("/").split("/")
+    if ".." in parts:
+        raise PackageError(f"path leaving the archive ('..') : {shown}")
+    if any(part in ("", ".") for part in parts):
+        raise PackageError(f"empty or '.' part in an archive name: {shown}")
+    if (len(raw.encode()) > MAX_NAME_BYTES
+            or any(len(part.encode()) > MAX_NAME_PART_BYTES for part in parts)):
+        raise PackageError(f"name too long in the archive (at most {MAX_NAME_PART_BYTES} bytes "
+                           f"a part, {MAX_NAME_BYTES} in all): {shown}")
+    name = "/".join(parts)
+    if PurePosixPath(name).suffix.lower() in COMPILED_SUFFIXES:
         raise PackageError(f"compiled or binary file not allowed: {name!r}")
-    return str(path)
+    return name
+
+
+# Executables, libraries, bytecode and archives, by their first bytes, whatever their name.
+_MAGIC = (
+    (b"\x7fELF", "an ELF executable or library"),
+    (b"\xfe\xed\xfa\xce", "a Mach-O binary"), (b"\xfe\xed\xfa\xcf", "a Mach-O binary"),
+    (b"\xce\xfa\xed\xfe", "a Mach-O binary"), (b"\xcf\xfa\xed\xfe", "a Mach-O binary"),
+    (b"\xca\xfe\xba\xbe", "a Mach-O or Java class file"),
+    (b"!<arch>\n", "a static library"),
+    (b"PK\x03\x04", "a zip archive (wheel, egg, jar)"), (b"PK\x05\x06", "a zip archive"),
+    (b"\x00asm", "a WebAssembly module"),
+    (b"\x1f\x8b", "a gzip archive"), (b"\xfd7zXZ\x00", "an xz archive"),
+)
+
+
+def _binary_kind(data: bytes) -> str | None:
+    """What executable or compiled content `data` is, or None."""
+    for magic, kind in _MAGIC:
+        if data.startswith(magic):
+            return kind
+    if data[:3] == b"BZh" and data[4:10] == b"1AY&SY":
+        return "a bzip2 archive"
+    if data[:2] == b"MZ" and len(data) >= 64:
+        offset = int.from_bytes(data[0x3C:0x40], "little")
+        if data[offset:offset + 4] == b"PE\0\0":
+            return "a Windows executable or library"
+    # Python bytecode: a 16-bit magic number of CPython 3 (3000 to 3999), then b"\r\n".
+    version = int.from_bytes(data[:2], "little")
+    if len(data) >= 16 and data[2:4] == b"\r\n" and 3000 <= version < 4000:
+        return "compiled Python bytecode"
+    return None
 
 
 # Run by `check_sources` as `python -I -S -c _CHECKER CPU_SECONDS MEMORY_BYTES`, the sources as
@@ -226,32 +276,49 @@ def load_package(filename: str, data: bytes, limits: PackageLimits | None = None
 def _read_zip(data: bytes, limits: PackageLimits) -> dict[str, bytes]:
     try:
         archive = zipfile.ZipFile(io.BytesIO(data))
-    except zipfile.BadZipFile:
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, ValueError, EOFError):
         raise PackageError("not a valid zip archive") from None
-    entries = [i for i in archive.infolist() if not i.is_dir()]
-    if len(entries) > limits.max_files:
-        raise PackageError(f"too many files: {len(entries)}, at most {limits.max_files}")
-    declared = sum(i.file_size for i in entries)
+    infos = archive.infolist()
+    count = sum(not info.orig_filename.endswith("/") for info in infos)
+    if count > limits.max_files or len(infos) > 2 * limits.max_files:
+        raise PackageError(f"too many files: {count} and {len(infos) - count} folders, at most "
+                           f"{limits.max_files} files")
+    named = [(_check_name(info.orig_filename), info) for info in infos]
+    folders = {name for name, info in named if info.orig_filename.endswith("/")}
+    entries = [(name, info) for name, info in named if not info.orig_filename.endswith("/")]
+    declared = sum(i.file_size for _, i in entries)
     if declared > limits.max_unpacked_bytes:
         raise PackageError(f"unpacks to {declared} bytes, at most {limits.max_unpacked_bytes}")
     files: dict[str, bytes] = {}
     total = 0
-    for info in entries:
-        name = _check_name(info.filename)
+    for name, info in entries:
         mode = info.external_attr >> 16
         if stat.S_ISLNK(mode):
-            raise PackageError(f"links are not allowed: {info.filename!r}")
+            raise PackageError(f"links are not allowed: {name!r}")
         if info.flag_bits & 0x1:
-            raise PackageError(f"encrypted entries are not allowed: {info.filename!r}")
+            raise PackageError(f"encrypted entries are not allowed: {name!r}")
+        if name in files:
+            raise PackageError(f"duplicate entry {name!r}")
         # Read with a cap: the declared sizes of a hostile archive may lie.
-        with archive.open(info) as fh:
-            content = fh.read(limits.max_unpacked_bytes - total + 1)
+        try:
+            with archive.open(info) as fh:
+                content = fh.read(limits.max_unpacked_bytes - total + 1)
+        except (zipfile.BadZipFile, NotImplementedError, RuntimeError, ValueError, EOFError,
+                OSError, zlib.error) as exc:
+            raise PackageError(f"cannot read {name!r} from the archive: {exc}") from None
         total += len(content)
         if total > limits.max_unpacked_bytes:
             raise PackageError(f"unpacks to more than {limits.max_unpacked_bytes} bytes")
-        if name in files:
-            raise PackageError(f"duplicate entry {name!r}")
+        kind = _binary_kind(content)
+        if kind is not None:
+            raise PackageError(f"compiled or binary file not allowed: {name!r} is {kind}")
         files[name] = content
+    # A file where another entry needs a folder of that name could not be unpacked.
+    for name in files:
+        folders.update(str(p) for p in PurePosixPath(name).parents if str(p) != ".")
+    clash = sorted(folders & set(files))
+    if clash:
+        raise PackageError(f"{clash[0]!r} is both a file and a folder in the archive")
     return files
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import ast
 import builtins
 import io
+import re
 import resource
 import time
 import zipfile
@@ -143,3 +144,104 @@ def test_the_api_refuses_them_with_422(api: tuple[TestClient, dict[str, str]], f
     response = _upload(api, filename, data)
     assert response.status_code == 422, response.text
     assert needle in response.json()["detail"]
+
+
+# -- names and content of archive entries -------------------------------------------------------
+
+def _raw_zip(names: list[str], data: bytes = b"x = 1\n") -> bytes:
+    """A zip whose entries have exactly `names` (written as raw as zipfile allows: a NUL is
+    put back into the stored name after writing)."""
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w") as archive:
+        archive.writestr("planner.py", GOOD)
+        for name in names:
+            archive.writestr(name.replace("\0", "\x01"), b"" if name.endswith("/") else data)
+    raw = buffer.getvalue()
+    for name in names:
+        if "\0" in name:
+            raw = raw.replace(name.replace("\0", "\x01").encode(), name.encode())
+    return raw
+
+
+@pytest.mark.parametrize(("names", "needle"), [
+    (["planner.py\0.txt"], "NUL character"),
+    (["util\0/evil.py"], "NUL character"),
+    (["bell\a.py"], "control character"),
+    (["new\nline.py"], "control character"),
+    (["./util.py"], "'.' part"),
+    (["lib/./util.py"], "'.' part"),
+    (["lib//util.py"], "empty or '.' part"),
+    (["lib", "lib/util.py"], "'lib' is both a file and a folder"),
+    (["lib/util.py", "lib"], "'lib' is both a file and a folder"),
+    (["a/b/c.py", "a/b"], "'a/b' is both a file and a folder"),
+    (["lib/", "lib"], "'lib' is both a file and a folder"),
+    ([("x" * 256) + ".py"], "name too long"),
+    (["/".join(["d" * 200] * 6) + "/u.py"], "name too long"),
+    (["..\\evil.py"], "non-POSIX"),
+    (["lib/../../evil.py"], "'..'"),
+])
+def test_archive_names_are_checked_as_stored(names: list[str], needle: str) -> None:
+    with pytest.raises(PackageError, match=re.escape(needle)):
+        load_package("code.zip", _raw_zip(names))
+
+
+def test_plain_folders_and_unicode_names_are_fine(tmp_path: Path) -> None:
+    package = load_package("code.zip", _raw_zip(["lib/", "lib/util.py", "données/notes.md"]))
+    assert set(package.files) == {"planner.py", "lib/util.py", "données/notes.md"}
+    package.extract(tmp_path / "code")
+    assert (tmp_path / "code" / "lib" / "util.py").read_bytes() == b"x = 1\n"
+
+
+ELF = b"\x7fELF\x02\x01\x01" + b"\0" * 57
+PE = b"MZ" + b"\0" * 58 + (64).to_bytes(4, "little") + b"PE\0\0" + b"\0" * 20
+
+
+@pytest.mark.parametrize(("name", "data", "kind"), [
+    ("notes.txt", ELF, "an ELF executable or library"),
+    ("data/weights.npy", ELF, "an ELF executable or library"),
+    ("helper.dat", PE, "a Windows executable"),
+    ("README", b"\xcf\xfa\xed\xfe" + b"\0" * 28, "a Mach-O binary"),
+    ("table.csv", b"\xa7\r\r\n" + b"\0" * 28, "compiled Python bytecode"),
+    ("vendor.txt", _zip({"m.py": b"x = 1"}), "a zip archive"),
+    ("blob.txt", b"\x1f\x8b\x08\x00" + b"\0" * 16, "a gzip archive"),
+])
+def test_binary_content_is_found_by_content(name: str, data: bytes, kind: str) -> None:
+    with pytest.raises(PackageError, match=f"{re.escape(repr(name))} is {re.escape(kind)}"):
+        load_package("code.zip", _zip({"planner.py": GOOD, name: data}))
+
+
+def test_text_and_plain_data_files_pass() -> None:
+    files = {"README.md": b"# MZ and BZh and PK are fine in text\r\n",
+             "table.csv": b"ab\r\ncd\r\n", "grid.npy": b"\x93NUMPY\x01\x00" + b"\0" * 100}
+    package = load_package("code.zip", _zip({"planner.py": GOOD, **files}))
+    assert set(package.files) == {"planner.py", *files}
+
+
+def test_a_corrupt_entry_is_refused_not_a_crash() -> None:
+    raw = bytearray(_zip({"planner.py": GOOD, "util.py": b"y = 2\n" * 1000}))
+    at = raw.find(b"util.py") + len(b"util.py") + 5  # inside the deflated data
+    raw[at:at + 8] = b"\xff" * 8
+    with pytest.raises(PackageError):
+        load_package("code.zip", bytes(raw))
+
+
+@pytest.mark.parametrize("names", [["lib", "lib/util.py"], ["x" * 300 + ".py"],
+                                   ["planner.py\0.sh"]])
+def test_the_api_refuses_bad_names_with_422(api: tuple[TestClient, dict[str, str]],
+                                           names: list[str]) -> None:
+    response = _upload(api, "code.zip", _raw_zip(names))
+    assert response.status_code == 422, response.text
+
+
+# -- what the planner process reports ----------------------------------------------------------
+
+def test_only_known_timing_keys_are_kept() -> None:
+    from worker.sandbox.proxy import clean_timing
+
+    hostile = {"map": 1.5, "plan": 2, "extra": 3.0, "planner_ms": 9.0, **{str(i): i for i in
+                                                                           range(1000)}}
+    assert clean_timing(hostile) == {"map": 1.5, "plan": 2.0}
+    assert clean_timing({"map": True, "plan": -1.0}) == {}
+    assert clean_timing({"map": float("nan"), "plan": float("inf")}) == {}
+    assert clean_timing({"map": "1", "plan": [1]}) == {}
+    assert clean_timing(["map", 1]) == {} and clean_timing(None) == {}

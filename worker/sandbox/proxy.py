@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import logging
+import math
 import os
 import select
 import shutil
@@ -261,8 +262,7 @@ class SandboxedPlanner:
             reply = self._call(with_changes, "plan")
         timing = reply.get("timing_ms")
         if isinstance(timing, dict):
-            self.timings.append({k: float(v) for k, v in timing.items()
-                                 if isinstance(v, int | float)})
+            self.timings.append(clean_timing(timing))
         try:
             return decode_plan(reply.get("plan"))
         except ProtocolError as exc:
@@ -491,6 +491,23 @@ def _cgroup_pids(path: Path) -> set[int]:
         return {int(pid) for pid in (path / "cgroup.procs").read_text().split()}
     except (OSError, ValueError):
         return set()
+
+
+# What the planner process reports of a call, ms: refreshing its map and the planner's `plan`.
+TIMING_KEYS = ("map", "plan")
+
+
+def clean_timing(timing: Any) -> dict[str, float]:
+    """The known keys of a reply's untrusted `timing_ms`, finite non-negative numbers only."""
+    if not isinstance(timing, dict):
+        return {}
+    clean = {}
+    for key in TIMING_KEYS:
+        value = timing.get(key)
+        if (isinstance(value, int | float) and not isinstance(value, bool)
+                and math.isfinite(value) and value >= 0):
+            clean[key] = float(value)
+    return clean
 
 
 def isolation_limit() -> int:
