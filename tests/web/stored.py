@@ -27,10 +27,15 @@ HOSTILE = "<script>alert('x')</script>"
 
 @functools.cache
 def current_version() -> str:
-    """The benchmark version of this tree, read once: the rows and the app agree on it."""
-    from flybo.versions import benchmark_version
+    """The benchmark version of this tree as this process's reproducibility records name it
+    (read once per process, as a worker reads it): the hand-made rows, the runs flown in the
+    tests' process and the apps the tests make all agree on it, even if the tree changes
+    meanwhile."""
+    from flybo.record import _process_code
 
-    return benchmark_version()
+    version = _process_code()[1]["benchmark_version"]
+    assert isinstance(version, str), "this tree's benchmark version could not be read"
+    return version
 
 
 def f32(values: Sequence[float]) -> bytes:
