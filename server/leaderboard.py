@@ -182,6 +182,14 @@ def _store(bind: Engine | Connection) -> _Store:
         return store
 
 
+def has_board(engine: Engine, preset: str, area: str | None, benchmark_version: str) -> bool:
+    """Whether this process holds a board of (preset, version, area), current or not: then the
+    version was known when it was computed (results are never deleted)."""
+    store = _store(engine)
+    with store.lock:
+        return (preset, benchmark_version, area) in store.served
+
+
 def build_leaderboard(session: Session, preset: str, area: str | None = None, *,
                       benchmark_version: str) -> Leaderboard:
     """The leaderboard of `benchmark_version`'s results, recomputed only when the stored

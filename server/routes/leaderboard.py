@@ -22,7 +22,7 @@ from server.benchmark_versions import (
     list_versions,
 )
 from server.deps import SessionDep
-from server.leaderboard import serve_leaderboard
+from server.leaderboard import has_board, serve_leaderboard
 from server.schemas import BenchmarkVersions, ErrorBody, Leaderboard
 
 router = APIRouter(tags=["leaderboard"])
@@ -69,14 +69,15 @@ async def leaderboard(
         current = str(await asyncio.to_thread(_in_thread_session, sessions, current_version,
                                               state))
     version = benchmark_version or current
-    served = await serve_leaderboard(state.engine, sessions, preset, area,
-                                     benchmark_version=version)
-    if not served.board.overall and version != current:
-        # Only an empty board can be of a version nobody knows: one more query, then.
+    if version != current and not has_board(state.engine, preset, area, version):
+        # Another version, not asked for before: is it one? (One query, and no board is
+        # computed and cached for a version nobody knows.)
         try:
             await asyncio.to_thread(_in_thread_session, sessions, _check, version, current)
         except UnknownBenchmarkVersionError as exc:
             raise HTTPException(404, str(exc)) from None
+    served = await serve_leaderboard(state.engine, sessions, preset, area,
+                                     benchmark_version=version)
     headers = {"ETag": served.etag, "Cache-Control": CACHE_CONTROL}
     if etag_matches(request.headers.get("if-none-match"), served.etag):
         return Response(status_code=304, headers=headers)
