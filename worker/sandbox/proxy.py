@@ -125,21 +125,25 @@ class SandboxedPlanner:
 
     def close(self) -> None:
         self._stop_sync.set()
+        # End the processes first: a map sync stuck on a full pipe then fails at once.
+        self._kill_all()
         if self._sync_thread is not None:
             self._sync_thread.join(timeout=5)
         if self.proc is not None:
-            if self.proc.poll() is None:
-                with contextlib.suppress(ProcessLookupError):
-                    os.killpg(self.proc.pid, signal.SIGKILL)
             self.proc.wait()
             for stream in (self.proc.stdin, self.proc.stdout):
                 if stream is not None:
                     stream.close()
-        for fd in (self._to, self._from):
-            if fd is not None:
-                with contextlib.suppress(OSError):
-                    os.close(fd)
-        self._to = self._from = None
+        # Under the send lock: a writer still running must not write into a reused fd number.
+        if self._send_lock.acquire(timeout=5):
+            try:
+                for fd in (self._to, self._from):
+                    if fd is not None:
+                        with contextlib.suppress(OSError):
+                            os.close(fd)
+                self._to = self._from = None
+            finally:
+                self._send_lock.release()
         if self.cgroups is not None:
             self.cgroups.cleanup()
         self.shared = None
@@ -308,6 +312,10 @@ class SandboxedPlanner:
         """End the planner process from any thread; the current or next call fails with
         `reason` (the dry run's wall-clock limit)."""
         self._failure = self._failure or reason
+        self._kill_all()
+
+    def _kill_all(self) -> None:
+        """Kill the process group and whatever else is in the sandbox's cgroups."""
         self._kill()
         if self.cgroups is not None:
             for path in self.cgroups.paths:
@@ -322,14 +330,15 @@ class SandboxedPlanner:
     def _write(self, data: bytes, deadline: float) -> None:
         """Write all of `data` to the non-blocking pipe before `deadline`, else
         `_StalledError`; `OSError` when the process is gone."""
-        if self._to is None:
-            raise BrokenPipeError("not started")
+        fd = self._to
+        if fd is None:
+            raise BrokenPipeError("not started, or closed")
         view = memoryview(data)
         poller = select.poll()
-        poller.register(self._to, select.POLLOUT)
+        poller.register(fd, select.POLLOUT)
         while view:
             try:
-                view = view[os.write(self._to, view):]
+                view = view[os.write(fd, view):]
                 continue
             except BlockingIOError:
                 pass
