@@ -264,3 +264,19 @@ def test_the_dry_run_has_a_wall_clock_limit(isolated: None) -> None:
     assert not outcome.passed
     assert "the dry run took longer than 8 s" in outcome.output, outcome.output
     assert outcome.wall_s < 10.0
+
+
+def test_closing_removes_the_sandbox_s_cgroups(tmp_path: Path, isolated: None) -> None:
+    # Killed processes keep a cgroup busy until they are reaped: closing waits for that
+    # rather than leaving one cgroup behind per sandbox in a long-lived worker.
+    code = tmp_path / "code"
+    code.mkdir()
+    (code / "planner.py").write_text(_planner("libc = ctypes.CDLL(None)\nwhile True:\n"
+                                              "    libc.fork()"))
+    area, truth = tiny_area()
+    limits = SandboxLimits(plan_timeout_s=3.0, processes=16)
+    with SandboxedPlanner(code=code, limits=limits) as planner:
+        run_episode(area, truth, planner, CONFIG, 0, seconds=4.0)
+        assert planner.cgroups is not None
+        paths = list(planner.cgroups.paths)
+    assert len(paths) == 2 and not any(path.exists() for path in paths)

@@ -31,6 +31,8 @@ import shutil
 import site
 import subprocess
 import sys
+import threading
+import time
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -209,19 +211,43 @@ class Cgroups:
         failcnt = self.memory / "memory.failcnt"
         return failcnt.exists() and failcnt.read_text().strip() not in ("", "0")
 
-    def cleanup(self) -> None:
-        for path in self.paths:
-            try:
-                procs = (path / "cgroup.procs").read_text().split()
-                for pid in procs:
-                    with contextlib.suppress(ProcessLookupError, ValueError):
-                        os.kill(int(pid), 9)
-                path.rmdir()
-            except OSError:
-                pass
+    def cleanup(self, wait_s: float = 2.0) -> None:
+        """Kill what is left in the cgroups and remove them. A cgroup stays busy until its
+        killed processes are reaped; one still busy after `wait_s` is removed by a later
+        `make_cgroups` instead of being left behind."""
+        remaining = list(self.paths)
+        deadline = time.monotonic() + wait_s
+        while True:
+            remaining = [path for path in remaining if not _remove_cgroup(path)]
+            if not remaining or time.monotonic() >= deadline:
+                break
+            time.sleep(0.02)
+        with _stale_lock:
+            _stale_cgroups.extend(remaining)
+
+
+# Cgroups of this process that were still busy when their sandbox closed.
+_stale_cgroups: list[Path] = []
+_stale_lock = threading.Lock()
+
+
+def _remove_cgroup(path: Path) -> bool:
+    """Kill the processes in cgroup `path` and remove it; whether it is gone."""
+    try:
+        for pid in (path / "cgroup.procs").read_text().split():
+            with contextlib.suppress(ProcessLookupError, ValueError):
+                os.kill(int(pid), 9)
+        path.rmdir()
+    except FileNotFoundError:
+        return True
+    except OSError:
+        return False
+    return True
 
 
 def make_cgroups(iso: Isolation, limits: SandboxLimits) -> Cgroups:
+    with _stale_lock:
+        _stale_cgroups[:] = [path for path in _stale_cgroups if not _remove_cgroup(path)]
     name = f"sbx-{uuid.uuid4().hex[:12]}"
     paths: list[Path] = []
     memory: Path | None = None
