@@ -147,7 +147,7 @@ def run_service_command(args: argparse.Namespace) -> None:
 def check_planner(path: Path) -> None:
     """`flybo planners check FILE`: the upload's checks and dry run, on this machine."""
     # The sandbox and, for the dry run, the simulation: loaded by this command only.
-    from server.planner_package import PackageError, load_package
+    from server.planner_package import CheckUnavailableError, PackageError, load_package
     from worker.sandbox.dry_run import dry_run
     from worker.sandbox.isolation import probe
 
@@ -161,7 +161,11 @@ def check_planner(path: Path) -> None:
         raise CliError(f"{path}: {exc}") from None
     for note in probe().notes:
         print(f"note: {note}")
-    outcome = dry_run(package)
+    try:
+        outcome = dry_run(package)
+    except CheckUnavailableError as exc:
+        raise CliError(f"{path}: the dry run needs the full sandbox: {exc} (for a local check "
+                       "only, FLYBO_SANDBOX_ALLOW_INSECURE=1 runs it without)") from None
     print(outcome.output)
     if not outcome.passed:
         raise CliError(f"{path} failed its dry run")
