@@ -259,8 +259,6 @@ def _wheel_of(root: Path, name: str, files: dict[str, str]) -> Path:
 
 @pytest.mark.slow
 def test_a_clashing_distribution_stops_flybo(tmp_path: Path, wheel: Path, cwd: Path) -> None:
-    if not (REPO / "flybo" / "distribution.py").is_file():
-        pytest.skip("flybo/distribution.py (the start-up check) is not in this tree")
     bin_dir = _fresh_venv(tmp_path / "venv", wheel)
     _run([bin_dir / "flybo", "presets"], cwd=cwd, env=_env(cwd))
     other = _wheel_of(tmp_path, "webtools", {"web/__init__.py": "SOMETHING = 'else'\n",
@@ -275,8 +273,6 @@ def test_a_clashing_distribution_stops_flybo(tmp_path: Path, wheel: Path, cwd: P
 
 @pytest.mark.slow
 def test_a_shadowing_folder_stops_flybo(installed: Path, cwd: Path) -> None:
-    if not (REPO / "flybo" / "distribution.py").is_file():
-        pytest.skip("flybo/distribution.py (the start-up check) is not in this tree")
     # `python -m flybo` puts the working folder first on sys.path.
     (cwd / "server").mkdir()
     (cwd / "server" / "__init__.py").write_text("")
@@ -305,9 +301,9 @@ def _unpack(wheel: Path, site: Path) -> None:
 
 
 def _check(site: Path) -> str | None:
-    distribution = pytest.importorskip("flybo.distribution",
-                                       reason="flybo/distribution.py is not in this tree")
     import importlib
+
+    from flybo import distribution
 
     importlib.invalidate_caches()
     try:
