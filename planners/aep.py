@@ -6,7 +6,8 @@ worth `zero_gain`, the cached nodes are re-evaluated on the current map (best fi
 cached gain discounted by the straight-line distance, an upper bound of their worth) and the
 vehicle flies a shortest grid path to the one with the best gain * exp(-lambda * path length).
 When no cached node gains more than `zero_gain`, Classic's nearest frontier takes over, and
-Classic's own end condition ends the exploration (aep-v2); aep-v1 ends the exploration there.
+Classic's own end condition ends the exploration (aep-v2 with classic-v1's settings, aep-v3 with
+classic-v2's); aep-v1 ends the exploration there.
 
 Both versions are one class, `AepPlanner`, configured by `AepBaseConfig`; a version is a config
 model that sets the defaults of the settings it differs in (`fallback` only, so far), and neither
@@ -24,7 +25,7 @@ import numpy as np
 from pydantic import Field
 
 from planners.api import FloatArray, Observation, Plan, PlannerContext
-from planners.classic import Classic, ClassicConfig, frontier_fallback
+from planners.classic import ClassicConfig, ClassicPlanner, ClassicV2Config, frontier_fallback
 from planners.nbv_tree import TreeOutcome
 from planners.nbvp import Nbvp, NbvpConfig
 from planners.spatial import SpatialIndex
@@ -81,6 +82,12 @@ class AepConfig(AepBaseConfig):
     fallback: ClassicConfig | None = ClassicConfig()
 
 
+class AepV3Config(AepBaseConfig):
+    """aep-v3: as aep-v2, with classic-v2's nearest frontier when the cache runs dry."""
+
+    fallback: ClassicV2Config | None = ClassicV2Config()
+
+
 class AepPlanner(Nbvp):
     """The code of every AEP version; `config_model` picks the version (see the module's
     docstring)."""
@@ -91,9 +98,9 @@ class AepPlanner(Nbvp):
     def reset(self, ctx: PlannerContext) -> None:
         super().reset(ctx)
         self._cache = SpatialIndex(cell_m=max(self.config.cache_spacing_m, 0.5))
-        self._fallback: Classic | None = None
+        self._fallback: ClassicPlanner | None = None
         if self.config.fallback is not None:
-            self._fallback = Classic(self.config.fallback)
+            self._fallback = ClassicPlanner(self.config.fallback)
             self._fallback.reset(ctx)
 
     def grow(self, obs: Observation, root: FloatArray) -> TreeOutcome:
@@ -184,3 +191,10 @@ class Aep(AepPlanner):
 
     config_model = AepConfig
     config: AepConfig
+
+
+class AepV3(AepPlanner):
+    """aep-v3."""
+
+    config_model = AepV3Config
+    config: AepV3Config

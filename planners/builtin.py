@@ -11,15 +11,20 @@ fingerprints to the lock file (`python -m flybo.versions --write` updates it).
 
 from __future__ import annotations
 
-from planners.aep import Aep, AepV1
+from planners.aep import Aep, AepV1, AepV3
 from planners.api import Planner
-from planners.classic import Classic
+from planners.classic import Classic, ClassicV2
 from planners.esm import Esm, EsmRecon
 from planners.nbvp import Nbvp
-from planners.rapid import Rapid
+from planners.rapid import Rapid, RapidV2
 from planners.registry import register
-from planners.splat import SplatPlanner
+from planners.splat import SplatPlanner, SplatPlannerV2
 
+_CLASSIC_REFERENCE = "B. Yamauchi, A frontier-based approach for autonomous exploration, CIRA 1997"
+_RAPID_REFERENCE = ("T. Cieslewski, E. Kaufmann, D. Scaramuzza, Rapid exploration with "
+                    "multi-rotors: a frontier selection method for high speed flight, IROS 2017")
+_SPLAT_REFERENCE = ("A. Brunel, A. Bourki, C. Demonceaux, O. Strauss, SplatPlanner: efficient "
+                    "autonomous exploration via permutohedral frontier filtering, ICRA 2021")
 _AEP_REFERENCE = ("M. Selin, M. Tiger, D. Duberg, F. Heintz, P. Jensfelt, Efficient "
                   "autonomous exploration planning of large-scale 3-D environments, RA-L 2019")
 _ESM_REFERENCE = ("L. Schmid, M. Pantic, R. Khanna, L. Ott, R. Siegwart, J. Nieto, An efficient "
@@ -31,14 +36,25 @@ BUILTINS: tuple[tuple[str, int, type[Planner], str, str], ...] = (
     (
         "classic", 1, Classic,
         "Nearest frontier by path length (Yamauchi 1997), replanned at every waypoint.",
-        "B. Yamauchi, A frontier-based approach for autonomous exploration, CIRA 1997",
+        _CLASSIC_REFERENCE,
+    ),
+    (
+        "classic", 2, ClassicV2,
+        "Nearest unvisited frontier by path length (Yamauchi 1997), replanned at every "
+        "waypoint; the frontier looked at from a reached viewpoint counts as visited, and a "
+        "vehicle the map closed in on escapes through known free space.",
+        _CLASSIC_REFERENCE,
     ),
     (
         "rapid", 1, Rapid,
         "Frontier in view needing the least change of velocity direction, flown at full "
         "speed and replanned in flight; nearest frontier otherwise.",
-        "T. Cieslewski, E. Kaufmann, D. Scaramuzza, Rapid exploration with multi-rotors: "
-        "a frontier selection method for high speed flight, IROS 2017",
+        _RAPID_REFERENCE,
+    ),
+    (
+        "rapid", 2, RapidV2,
+        "As rapid-v1, with classic-v2's nearest unvisited frontier as the fallback.",
+        _RAPID_REFERENCE,
     ),
     (
         "nbvp", 1, Nbvp,
@@ -60,11 +76,21 @@ BUILTINS: tuple[tuple[str, int, type[Planner], str, str], ...] = (
         _AEP_REFERENCE,
     ),
     (
+        "aep", 3, AepV3,
+        "As aep-v2, with classic-v2's nearest unvisited frontier when no cached node is "
+        "worth visiting.",
+        _AEP_REFERENCE,
+    ),
+    (
         "splatplanner", 1, SplatPlanner,
         "Frontier voxels (position, normal) filtered on a permutohedral lattice; the "
         "viewpoint with the best filtered frontier density per flight time, reached by A*.",
-        "A. Brunel, A. Bourki, C. Demonceaux, O. Strauss, SplatPlanner: efficient "
-        "autonomous exploration via permutohedral frontier filtering, ICRA 2021",
+        _SPLAT_REFERENCE,
+    ),
+    (
+        "splatplanner", 2, SplatPlannerV2,
+        "As splatplanner-v1, with classic-v2's nearest unvisited frontier as the fallback.",
+        _SPLAT_REFERENCE,
     ),
     (
         "esm-ipp", 1, Esm,

@@ -4,20 +4,33 @@ Fly to the nearest frontier by path length: a Dijkstra search through traversabl
 the first viewpoint of any frontier cluster; the path is shortened by line-of-sight checks and
 flown with the camera looking along each leg, then at the frontier. Replans at every waypoint.
 Frontier voxels that stay frontiers after being looked at from their viewpoint twice are given up.
+
+Versions: classic-v1 (`ClassicConfig`) takes a viewpoint that sees the frontier voxel, gives up
+each target alone, and searches from the nearest traversable voxel within three of the
+vehicle's. classic-v2 (`ClassicV2Config`) takes only viewpoints that see into the unknown beside
+the frontier voxel (`planners.viewpoints.sees_into_unknown`); keeps Yamauchi's list of visited
+frontiers: every frontier voxel the camera looked into from a reached viewpoint counts as
+visited, besides the target (`planners.give_up`); and where the map no longer lets the vehicle
+stand, it searches from the traversable voxels the framework lets it escape to
+(`planners.waypoints.escape_starts`), trying the next pocket when one leads nowhere.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from pydantic import Field
 
 from planners.api import Observation, Plan, Planner, PlannerConfig, PlannerContext
 from planners.give_up import GiveUpTracker
-from planners.search import DistanceField, IndexArray, shortcut
+from planners.search import BoolGrid, DistanceField, IndexArray, shortcut
 from planners.viewpoints import frontier_viewpoints, ring_offsets
-from planners.waypoints import nearest_traversable, path_waypoints
+from planners.waypoints import escape_starts, nearest_traversable, path_waypoints
+
+# Pockets of traversable space an escaping vehicle tries before the exploration ends: each
+# failed search floods its whole pocket.
+_MAX_POCKETS = 4
 
 
 class ClassicConfig(PlannerConfig):
@@ -31,10 +44,45 @@ class ClassicConfig(PlannerConfig):
     max_view_elevation_deg: float = Field(30.0, gt=0.0, lt=90.0)
     give_up_after: int = Field(2, ge=1, description="visits that left the target a frontier")
     give_up_radius_voxels: int = Field(2, ge=0)
+    # v2: a viewpoint must see into the unknown beside its frontier voxel, not the voxel alone
+    # (`planners.viewpoints.sees_into_unknown`): the robot goes to a frontier to sense what lies
+    # beyond it. Forced by the map: a floor voxel that grazing rays left free over the unknown
+    # interior of the slab is a frontier no view clears (half of OFFICES B's frontier voxels),
+    # and v1 spent most of its flight looking at them from 0.65 m up. False (v1): a clear line
+    # of sight to the frontier voxel suffices.
+    view_into_unknown: bool = False
+    # v2: Yamauchi's robot marks the frontier it reached as visited once it has sensed all
+    # around; a level camera with a 90 degree view senses what it looks at, so every frontier
+    # voxel in view within this distance of a reached viewpoint, with a clear line of sight
+    # into its unknown side, counts as visited (given up after `give_up_after` such arrivals).
+    # The distance is the farthest viewpoint distance: there the 80 x 60 rays fused per frame
+    # are still under a voxel apart. None (v1): the target alone counts.
+    visited_view_reach_m: float | None = Field(None, gt=0.0)
+    # v2, forced by the framework: the traversable mask keeps the safety radius from unknown and
+    # occupied voxels, so a newly seen obstacle can leave the vehicle outside it (a desk edge
+    # 0.4 m away), where Yamauchi's point robot on its grid never stands. The framework lets the
+    # first leg leave through known free voxels: the search starts from the traversable voxels
+    # within this many voxels that such a leg reaches, nearest first, trying the next pocket
+    # when one leads to no viewpoint. None (v1): the nearest traversable voxel within 3, or the
+    # end of the exploration.
+    escape_reach_voxels: int | None = Field(None, ge=1)
 
 
-class Classic(Planner):
-    config_model = ClassicConfig
+class ClassicV2Config(ClassicConfig):
+    """classic-v2: viewpoints see into the unknown, visited frontiers are what the camera looked
+    into, and the vehicle escapes where the map closed in around it (see the fields'
+    comments)."""
+
+    view_into_unknown: bool = True
+    visited_view_reach_m: float | None = Field(3.5, gt=0.0)
+    escape_reach_voxels: int | None = Field(10, ge=1)
+
+
+class ClassicPlanner(Planner):
+    """The code of every Classic version; `config_model` picks the version, and a planner
+    falling back to Classic passes the config of the version it wants."""
+
+    config_model: ClassVar[type[ClassicConfig]] = ClassicConfig
     config: ClassicConfig
 
     def reset(self, ctx: PlannerContext) -> None:
@@ -43,7 +91,8 @@ class Classic(Planner):
         self._offsets = ring_offsets(
             cfg.view_distances_m, cfg.view_height_offsets_m, cfg.view_directions
         )
-        self._give_up = GiveUpTracker(cfg.give_up_after, cfg.give_up_radius_voxels)
+        self._give_up = GiveUpTracker(cfg.give_up_after, cfg.give_up_radius_voxels,
+                                      camera=ctx.camera, view_reach_m=cfg.visited_view_reach_m)
         self._goal: IndexArray | None = None
         self._target: IndexArray | None = None
 
@@ -54,8 +103,12 @@ class Classic(Planner):
         clusters = view.frontier_clusters(cfg.min_cluster_size)
         if not clusters:
             return Plan.finished("no frontier left")
-        start = nearest_traversable(view.traversable, here)
-        if start is None:
+        if cfg.escape_reach_voxels is None:
+            start = nearest_traversable(view.traversable, here)
+            starts = np.zeros((0, 3), dtype=np.int64) if start is None else start[None]
+        else:
+            starts = escape_starts(view, obs.pose.position, cfg.escape_reach_voxels)
+        if len(starts) == 0:
             return Plan.finished("the vehicle is not in traversable space")
         viewpoints = frontier_viewpoints(
             view,
@@ -65,14 +118,15 @@ class Classic(Planner):
             max_elevation_rad=np.radians(cfg.max_view_elevation_deg),
             max_range_m=self.context.camera.max_range_m,
             excluded=given_up,
+            into_unknown=cfg.view_into_unknown,
         )
         if len(viewpoints) == 0:
             return Plan.finished("no frontier can be seen from traversable space")
         goals = np.zeros(view.shape, dtype=np.bool_)
         goals[viewpoints.voxels[:, 0], viewpoints.voxels[:, 1], viewpoints.voxels[:, 2]] = True
-        field = DistanceField(view.traversable, start, view.voxel_size, goals=goals)
-        goal = field.nearest_goal
-        if goal is None:
+        field = self._search(view.traversable, starts, view.voxel_size, goals)
+        goal = None if field is None else field.nearest_goal
+        if field is None or goal is None:
             return Plan.finished("no frontier viewpoint is reachable")
         which = np.flatnonzero(np.all(viewpoints.voxels == goal, axis=1))[0]
         self._goal, self._target = goal, viewpoints.targets[which]
@@ -85,8 +139,40 @@ class Classic(Planner):
             info={"clusters": len(clusters), "path_m": field.distance_to(goal)},
         )
 
+    @staticmethod
+    def _search(traversable: BoolGrid, starts: IndexArray, voxel_size: float,
+                goals: BoolGrid) -> DistanceField | None:
+        """The search from the first of `starts` that reaches a goal, skipping starts a failed
+        search already reached (the same pocket), at most `_MAX_POCKETS` searches; None when
+        none does."""
+        failed: list[DistanceField] = []
+        for start in starts:
+            if any(np.isfinite(f.distance_to(start)) for f in failed):
+                continue
+            field = DistanceField(traversable, start, voxel_size, goals=goals)
+            if field.nearest_goal is not None or len(starts) == 1:
+                return field
+            failed.append(field)
+            if len(failed) == _MAX_POCKETS:
+                break
+        return None
 
-def frontier_fallback(fallback: Classic, obs: Observation, **info: Any) -> Plan:
+
+class Classic(ClassicPlanner):
+    """classic-v1."""
+
+    config_model = ClassicConfig
+    config: ClassicConfig
+
+
+class ClassicV2(ClassicPlanner):
+    """classic-v2."""
+
+    config_model = ClassicV2Config
+    config: ClassicV2Config
+
+
+def frontier_fallback(fallback: ClassicPlanner, obs: Observation, **info: Any) -> Plan:
     """Classic's nearest frontier as another planner's fallback: Classic's plan, marked
     `mode: classic` with `info` added, or Classic's own end of the exploration."""
     plan = fallback.plan(obs)

@@ -5,7 +5,8 @@ the least change of the current velocity direction, and keep flying: the planner
 every `replan_period_s` of flight, and each new trajectory starts from the moving state, so the
 vehicle does not stop between decisions. The goal is the farthest point toward that frontier the
 vehicle can reach in a straight line through traversable space. With no usable frontier in view
-it falls back to Classic's nearest frontier by path length (`planners.classic`).
+it falls back to Classic's nearest frontier by path length (`planners.classic`): classic-v1's
+(rapid-v1) or classic-v2's (rapid-v2), the only difference between the two versions.
 
 Some frontier voxels never clear (their unknown neighbours cannot be seen from traversable
 space). A frontier voxel that has been in view, close by, at `give_up_views` decisions and is still
@@ -15,12 +16,14 @@ it; this plays the part of Classic's giving up a target after visiting its viewp
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 import numpy.typing as npt
 from pydantic import Field
 
 from planners.api import Observation, Plan, Planner, PlannerConfig, PlannerContext, PlanOutcome
-from planners.classic import Classic, ClassicConfig
+from planners.classic import ClassicConfig, ClassicPlanner, ClassicV2Config
 from planners.frontiers import frontiers_in_view
 from planners.lines import farthest_clear_point, reachable_lengths
 from planners.search import IndexArray
@@ -57,17 +60,25 @@ class RapidConfig(PlannerConfig):
     # Our choice: when the fallback finds no reachable frontier although frontiers remain,
     # turn on the spot (a quarter turn each time) to look again before giving up.
     look_around_turns: int = Field(4, ge=0)
-    # The fallback is Classic with its own defaults.
+    # The fallback is Classic with its own defaults (classic-v1's).
     fallback: ClassicConfig = ClassicConfig()
 
 
-class Rapid(Planner):
-    config_model = RapidConfig
+class RapidV2Config(RapidConfig):
+    """rapid-v2: classic-v2 as the fallback."""
+
+    fallback: ClassicV2Config = ClassicV2Config()
+
+
+class RapidPlanner(Planner):
+    """The code of every Rapid version; `config_model` picks the version."""
+
+    config_model: ClassVar[type[RapidConfig]] = RapidConfig
     config: RapidConfig
 
     def reset(self, ctx: PlannerContext) -> None:
         super().reset(ctx)
-        self._classic = Classic(self.config.fallback)
+        self._classic = ClassicPlanner(self.config.fallback)
         self._classic.reset(ctx)
         self._given_up: npt.NDArray[np.bool_] | None = None
         self._views: npt.NDArray[np.uint16] | None = None  # decisions each voxel was seen at
@@ -162,3 +173,17 @@ class Rapid(Planner):
             yaw = float(np.arctan2(offsets[n, 1], offsets[n, 0]))
             return np.array([*point, yaw]), idx[n], float(angles[n])
         return None
+
+
+class Rapid(RapidPlanner):
+    """rapid-v1."""
+
+    config_model = RapidConfig
+    config: RapidConfig
+
+
+class RapidV2(RapidPlanner):
+    """rapid-v2."""
+
+    config_model = RapidV2Config
+    config: RapidV2Config

@@ -15,12 +15,15 @@ feature (its target, its viewing direction). As in the authors' planner, the can
 least `candidate_spacing_m` apart, the best quarter by density, the nearest half and a random
 remainder are kept, and the vehicle flies an A* path to the one with the best
 density / (1 + flight time). Targets still frontier after two visits of their viewpoint are given
-up (as Classic does); when no candidate is reachable, Classic's nearest frontier takes over.
+up (as Classic does); when no candidate is reachable, Classic's nearest frontier takes over:
+classic-v1's (splatplanner-v1) or classic-v2's (splatplanner-v2), the only difference between the
+two versions.
 """
 
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import numba
 import numpy as np
@@ -29,7 +32,7 @@ from pydantic import Field
 
 from planners.api import Observation, Plan, Planner, PlannerConfig, PlannerContext
 from planners.astar import PathCache
-from planners.classic import Classic, ClassicConfig, frontier_fallback
+from planners.classic import ClassicConfig, ClassicPlanner, ClassicV2Config, frontier_fallback
 from planners.give_up import GiveUpTracker
 from planners.lines import segments_clear
 from planners.permutohedral import PermutohedralLattice
@@ -87,6 +90,12 @@ class SplatConfig(PlannerConfig):
     give_up_after: int = Field(2, ge=1)
     give_up_radius_voxels: int = Field(2, ge=0)
     fallback: ClassicConfig = ClassicConfig()
+
+
+class SplatV2Config(SplatConfig):
+    """splatplanner-v2: classic-v2 as the fallback."""
+
+    fallback: ClassicV2Config = ClassicV2Config()
 
 
 @numba.njit(cache=True)
@@ -184,14 +193,16 @@ def flight_time(lengths_m: FloatArray, v_max: float, a_max: float) -> float:
     return float(np.sum(t))
 
 
-class SplatPlanner(Planner):
-    config_model = SplatConfig
+class SplatBase(Planner):
+    """The code of every SplatPlanner version; `config_model` picks the version."""
+
+    config_model: ClassVar[type[SplatConfig]] = SplatConfig
     config: SplatConfig
 
     def reset(self, ctx: PlannerContext) -> None:
         super().reset(ctx)
         self._paths = PathCache()
-        self._fallback = Classic(self.config.fallback)
+        self._fallback = ClassicPlanner(self.config.fallback)
         self._fallback.reset(ctx)
         self._give_up = GiveUpTracker(self.config.give_up_after,
                                       self.config.give_up_radius_voxels)
@@ -388,3 +399,17 @@ class SplatPlanner(Planner):
         """Classic's nearest frontier, whose own end condition ends the exploration."""
         self._goal, self._target = None, None
         return frontier_fallback(self._fallback, obs, why=why, vertices=vertices)
+
+
+class SplatPlanner(SplatBase):
+    """splatplanner-v1."""
+
+    config_model = SplatConfig
+    config: SplatConfig
+
+
+class SplatPlannerV2(SplatBase):
+    """splatplanner-v2."""
+
+    config_model = SplatV2Config
+    config: SplatV2Config

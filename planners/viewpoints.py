@@ -2,7 +2,9 @@
 
 A viewpoint is a traversable voxel from which the level camera can see a frontier voxel: within a
 horizontal ring around it, inside the vertical field of view, with no occupied voxel on the line
-of sight (unknown voxels on it may well be free: sensor noise leaves such holes).
+of sight (unknown voxels on it may well be free: sensor noise leaves such holes). With
+`into_unknown`, the line of sight to one of the frontier voxel's unknown face neighbours must be
+clear as well: seeing a free voxel clears nothing, seeing into the unknown beside it does.
 """
 
 from __future__ import annotations
@@ -15,6 +17,10 @@ import numpy.typing as npt
 
 from planners.search import BoolGrid, IndexArray
 from sim.map_view import FrontierCluster, MapView
+from sim.occupancy import VoxelState
+
+FACES = np.array([(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)],
+                 dtype=np.int64)
 
 
 @dataclass(frozen=True)
@@ -36,7 +42,7 @@ class Viewpoints:
 
 
 @numba.njit(cache=True)
-def _lines_clear(
+def lines_clear(
     blocked: BoolGrid, a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]
 ) -> npt.NDArray[np.bool_]:
     """For each pair a[i]→b[i] (voxel units), whether no voxel strictly between the two end
@@ -80,6 +86,7 @@ def frontier_viewpoints(
     max_range_m: float,
     excluded: BoolGrid | None = None,
     extra: IndexArray | None = None,
+    into_unknown: bool = False,
 ) -> Viewpoints:
     """Viewpoints for up to `samples_per_cluster` voxels of each cluster.
 
@@ -88,6 +95,8 @@ def frontier_viewpoints(
         excluded: frontier voxels to skip (e.g. targets given up on).
         extra: (E, 3) voxels tried as viewpoints of every sampled frontier voxel besides the
             ring (e.g. the vehicle's own, so that turning on the spot is an option).
+        into_unknown: keep only viewpoints that also see into an unknown face neighbour of
+            their frontier voxel (`sees_into_unknown`).
     """
     targets, ids = [], []
     for cluster in clusters:
@@ -133,6 +142,31 @@ def frontier_viewpoints(
         cand[ok], cand_c[ok], tgt_c[ok], rep_targets[ok], rep_ids[ok]
     )
     if len(cand):
-        clear = _lines_clear(view.occupied, np.floor(cand_c) + 0.5, tgt_c)
+        clear = lines_clear(view.occupied, np.floor(cand_c) + 0.5, tgt_c)
         cand, rep_targets, rep_ids = cand[clear], rep_targets[clear], rep_ids[clear]
+    if into_unknown and len(cand):
+        into = sees_into_unknown(view, cand.astype(np.float64) + 0.5, rep_targets)
+        cand, rep_targets, rep_ids = cand[into], rep_targets[into], rep_ids[into]
     return Viewpoints(cand, rep_targets, rep_ids)
+
+
+def sees_into_unknown(view: MapView, eyes: npt.NDArray[np.float64],
+                      voxels: IndexArray) -> npt.NDArray[np.bool_]:
+    """(N,) whether the line of sight from each eye ((N, 3), voxel units) to an unknown face
+    neighbour of its frontier voxel ((N, 3)) crosses no occupied voxel, ends excluded.
+
+    A frontier voxel no such line reaches cannot be cleared from that eye: the free voxels a
+    floor slab's surface shares with grazing rays, say, lie over the slab's interior, unknown
+    for good, that the occupied floor voxels around them hide."""
+    shape = np.array(view.shape)
+    seen = np.zeros(len(voxels), dtype=np.bool_)
+    for face in FACES:
+        nb = voxels + face
+        inside = np.all((nb >= 0) & (nb < shape), axis=1)
+        nb = np.where(inside[:, None], nb, 0)
+        unknown = inside & (view.state[nb[:, 0], nb[:, 1], nb[:, 2]] == VoxelState.UNKNOWN)
+        todo = np.flatnonzero(unknown & ~seen)
+        if len(todo):
+            seen[todo] = lines_clear(view.occupied, np.ascontiguousarray(eyes[todo]),
+                                     nb[todo].astype(np.float64) + 0.5)
+    return seen

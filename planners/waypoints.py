@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import numpy.typing as npt
 
 from planners.astar import PathCache
 from planners.search import BoolGrid, IndexArray, segment_clear, shortcut
 from sim.map_view import MapView
+from sim.search_checks import segment_in_mask
 
 
 def nearest_traversable(
@@ -29,6 +31,44 @@ def nearest_traversable(
     cells = cells + lo
     best = np.argmin(np.sum((cells - np.array([i, j, k])) ** 2, axis=1))
     return cells[best].astype(np.int64)
+
+
+@numba.njit(cache=True)
+def _escapes_clear(traversable: BoolGrid, free: BoolGrid, a: npt.NDArray[np.float64],
+                   cells: IndexArray) -> npt.NDArray[np.bool_]:
+    out = np.empty(cells.shape[0], dtype=np.bool_)
+    for n in range(cells.shape[0]):
+        out[n] = segment_in_mask(traversable, free, a, cells[n].astype(np.float64) + 0.5, True)
+    return out
+
+
+def escape_starts(view: MapView, position: npt.ArrayLike, reach: int) -> IndexArray:
+    """(S, 3) the voxels a search may start from for the vehicle at `position` (world (3,)),
+    nearest first: its own voxel alone when traversable; otherwise every traversable voxel
+    within `reach` voxels on each axis that the straight leg from `position` enters through
+    known free voxels only, as the framework lets a vehicle leave where the map no longer
+    allows (`sim.search_checks.plan_is_clear`). Empty when there is none.
+
+    `nearest_traversable` takes the nearest traversable voxel within three, whether the leg to
+    it is flyable or not and whichever of several pockets it lies in; a caller that finds no
+    way on from one start can try the next start of another pocket."""
+    pos = np.asarray(position, dtype=np.float64)
+    voxel = view.world_to_index(pos[None])[0]
+    shape = np.array(view.shape)
+    trav = view.traversable
+    if np.all((voxel >= 0) & (voxel < shape)) and trav[voxel[0], voxel[1], voxel[2]]:
+        return voxel[None].astype(np.int64)
+    lo = np.maximum(voxel - reach, 0)
+    hi = np.minimum(voxel + reach + 1, shape)
+    if np.any(hi <= lo):
+        return np.zeros((0, 3), dtype=np.int64)
+    cells = np.argwhere(trav[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]) + lo
+    if len(cells) == 0:
+        return np.zeros((0, 3), dtype=np.int64)
+    a = (pos - view.origin) / view.voxel_size
+    d2 = np.sum((cells + 0.5 - a) ** 2, axis=1)
+    cells = cells[np.argsort(d2, kind="stable")].astype(np.int64)
+    return cells[_escapes_clear(trav, view.free, a, np.ascontiguousarray(cells))]
 
 
 def tree_root(view: MapView,

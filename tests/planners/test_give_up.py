@@ -7,6 +7,7 @@ import pytest
 
 from planners.give_up import GiveUpTracker
 from planners.search import IndexArray
+from sim.camera import CameraConfig
 from sim.geometry import Pose
 from sim.interface import Observation, PlanOutcome
 from sim.map_view import MapView
@@ -143,3 +144,113 @@ def test_arrival_means_within_one_voxel_of_the_goal(make_stack: StackFactory) ->
     assert tracker.visits == {(6, 6, 7): 1}
     tracker.update(_idx(6, 6, 11), goal, MIDDLE_TARGET, _obs(view))  # two voxels away
     assert tracker.visits == {(6, 6, 7): 1}
+
+
+# -- visited frontiers: every frontier voxel looked at from a reached viewpoint ------------------
+
+LONG = (60, 20, 20)  # 6 x 2 x 2 m, free; the vehicle at x = 0.55 m looks along +x
+EYE = np.array([0.55, 1.05, 1.05])
+EYE_VOXEL = _idx(5, 10, 10)
+
+
+def _long_view(make_stack: StackFactory, unknown: list[tuple[int, int, int]],
+               occupied: list[tuple[int, int, int]] = ()) -> MapView:  # type: ignore[assignment]
+    state = np.full(LONG, VoxelState.FREE, dtype=np.uint8)
+    for voxel in unknown:
+        state[voxel] = VoxelState.UNKNOWN
+    for voxel in occupied:
+        state[voxel] = VoxelState.OCCUPIED
+    return make_stack(state, VOXEL, 0.2).view()
+
+
+def _looking(view: MapView, yaw: float = 0.0) -> Observation:
+    return Observation(time=0.0, pose=Pose(EYE.copy(), yaw), velocity=np.zeros(3), map=view,
+                       last_outcome=PlanOutcome.REACHED)
+
+
+def _in_view_tracker(after: int = 2) -> GiveUpTracker:
+    return GiveUpTracker(after=after, radius_voxels=2, camera=CameraConfig(), view_reach_m=3.5)
+
+
+def test_frontier_voxels_looked_at_are_given_up_after_the_nth_arrival(
+    make_stack: StackFactory,
+) -> None:
+    # An unknown voxel 2 m ahead: its near face neighbour (24, 10, 10) is a frontier voxel
+    # whose unknown side the camera looks straight into.
+    view = _long_view(make_stack, [(25, 10, 10)])
+    tracker = _in_view_tracker(after=2)
+    target = _idx(24, 10, 10)
+    mask = tracker.update(EYE_VOXEL, EYE_VOXEL, target, _looking(view))
+    assert not mask.any()
+    mask = tracker.update(EYE_VOXEL, EYE_VOXEL, target, _looking(view))
+    # The target's cube as before, and every other face neighbour looked at, on its own.
+    assert mask[24, 10, 10]
+    for voxel in [(25, 9, 10), (25, 11, 10), (25, 10, 9), (25, 10, 11)]:
+        assert mask[voxel], voxel
+    # The far neighbour's unknown side faces away, but the line of sight to the unknown voxel
+    # crosses no occupied voxel: looked at too.
+    assert mask[26, 10, 10]
+
+
+def test_a_frontier_voxel_not_the_target_counts_on_its_own(make_stack: StackFactory) -> None:
+    view = _long_view(make_stack, [(25, 10, 10), (35, 12, 10)])
+    tracker = _in_view_tracker(after=2)
+    target = _idx(24, 10, 10)
+    for _ in range(2):
+        mask = tracker.update(EYE_VOXEL, EYE_VOXEL, target, _looking(view))
+    for voxel in [(34, 12, 10), (36, 12, 10), (35, 11, 10), (35, 13, 10)]:
+        assert mask[voxel], voxel
+    # No cube around voxels that were not the target: only the voxels looked at.
+    assert not mask[33, 12, 10]
+    assert not mask[37, 12, 10]
+
+
+def test_occluded_far_and_unseen_frontier_voxels_do_not_count(make_stack: StackFactory) -> None:
+    wall = [(20, j, k) for j in range(0, 20) for k in range(0, 20) if j < 8]
+    view = _long_view(
+        make_stack,
+        [(25, 10, 10),  # in view: counted
+         (25, 4, 10),   # behind the wall (y < 0.8 m at x = 2 m)
+         (45, 10, 10),  # 4 m ahead, beyond the reach of 3.5 m
+         (2, 10, 10)],  # behind the camera
+        wall,
+    )
+    tracker = _in_view_tracker(after=1)
+    mask = tracker.update(EYE_VOXEL, EYE_VOXEL, _idx(24, 10, 10), _looking(view))
+    assert mask[24, 10, 10]
+    assert not mask[24, 4, 10] and not mask[25, 5, 10]
+    assert not mask[44, 10, 10]
+    assert not mask[3, 10, 10] and not mask[1, 10, 10]
+
+
+def test_a_turned_camera_looks_at_other_voxels(make_stack: StackFactory) -> None:
+    view = _long_view(make_stack, [(25, 10, 10), (35, 12, 10)])
+    tracker = _in_view_tracker(after=1)
+    # Looking along -x: nothing ahead but the grid's edge. The target still counts, alone.
+    mask = tracker.update(EYE_VOXEL, EYE_VOXEL, _idx(24, 10, 10), _looking(view, np.pi))
+    assert mask[24, 10, 10]
+    assert np.count_nonzero(mask) == np.count_nonzero(mask[22:27, 8:13, 8:13])
+    assert not mask[34, 12, 10]
+    # Looking along +x from there, the second voxel's neighbours are looked at.
+    mask = tracker.update(EYE_VOXEL, EYE_VOXEL, _idx(24, 10, 10), _looking(view))
+    assert mask[34, 12, 10]
+
+
+def test_looks_count_only_arrivals(make_stack: StackFactory) -> None:
+    view = _long_view(make_stack, [(25, 10, 10)])
+    tracker = _in_view_tracker(after=1)
+    # No previous target, or not arrived: nothing counts.
+    assert not tracker.update(EYE_VOXEL, None, None, _looking(view)).any()
+    away = _idx(15, 10, 10)
+    assert not tracker.update(EYE_VOXEL, away, _idx(24, 10, 10), _looking(view)).any()
+    blocked = Observation(0.0, Pose(EYE.copy(), 0.0), np.zeros(3), view, PlanOutcome.BLOCKED)
+    assert not tracker.update(EYE_VOXEL, EYE_VOXEL, _idx(24, 10, 10), blocked).any()
+
+
+def test_without_a_reach_only_the_target_counts(make_stack: StackFactory) -> None:
+    """classic-v1's tracker: the camera alone changes nothing."""
+    view = _long_view(make_stack, [(25, 10, 10), (35, 12, 10)])
+    tracker = GiveUpTracker(after=1, radius_voxels=0, camera=CameraConfig())
+    mask = tracker.update(EYE_VOXEL, EYE_VOXEL, _idx(24, 10, 10), _looking(view))
+    assert np.count_nonzero(mask) == 1
+    assert mask[24, 10, 10]

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from planners.aep import Aep, AepConfig
+from planners.aep import AepConfig, AepPlanner
 from planners.gain import GainEvaluator
 from planners.nbv_tree import TreeSettings, grow_tree
 from planners.nbvp import Nbvp, NbvpConfig
@@ -227,7 +227,7 @@ def test_branch_values_accumulate_discounted_gains() -> None:
 
 def test_aep_goes_back_to_a_cached_view_when_the_local_gain_runs_out() -> None:
     planner = make("aep")
-    assert isinstance(planner, Aep)
+    assert isinstance(planner, AepPlanner)
     planner.reset(_context())
     state = _corridor(4.5)
     first = planner.plan(_observe(state))
@@ -263,7 +263,7 @@ def test_aep_flies_to_the_nearest_frontier_when_its_cache_runs_dry() -> None:
     state = _corridor(8.0)
     state[72:75, 19:22, 11:14] = VoxelState.UNKNOWN  # 5.7 m ahead, out of the box's reach
     planner = make("aep", {"sampling_radius_m": 0.3})
-    assert isinstance(planner, Aep)
+    assert isinstance(planner, AepPlanner)
     planner.reset(_context())
     obs = _observe(state)
     plan = planner.plan(obs)
@@ -277,7 +277,7 @@ def test_aep_flies_to_the_nearest_frontier_when_its_cache_runs_dry() -> None:
     first = make("aep-v1", {"sampling_radius_m": 0.3})
     first.reset(_context())
     assert first.plan(obs).done
-    assert spec("aep").id == "aep-v2"
+    assert spec("aep").id == "aep-v3"
 
 
 def _holed_wall() -> np.ndarray:

@@ -103,7 +103,7 @@ def test_spec_of_unknown_version_lists_the_known_versions() -> None:
 
 
 def test_make_applies_config() -> None:
-    planner = make("classic", {"min_cluster_size": 3})
+    planner = make("classic-v1", {"min_cluster_size": 3})
     assert isinstance(planner, Classic)
     assert isinstance(planner.config, ClassicConfig)
     assert planner.config.min_cluster_size == 3
@@ -114,7 +114,7 @@ def test_make_applies_config() -> None:
 def test_make_without_config_uses_defaults() -> None:
     planner = make("classic-v1")
     assert planner.config == ClassicConfig()
-    assert make("classic", None).config == ClassicConfig()
+    assert make("classic-v1", None).config == ClassicConfig()
 
 
 def test_make_gives_a_new_instance_each_time() -> None:
@@ -133,7 +133,7 @@ def test_make_gives_a_new_instance_each_time() -> None:
 )
 def test_make_rejects_invalid_config(config: dict[str, object]) -> None:
     with pytest.raises(PlannerConfigError, match="classic-v1") as info:
-        make("classic", config)
+        make("classic-v1", config)
     assert isinstance(info.value, ValueError)
     # The message names the offending setting.
     (key,) = config
@@ -235,10 +235,10 @@ def test_unknown_name_suggests_the_closest_known(text: str, suggested: str) -> N
 
 def test_unknown_version_suggests_the_known_versions() -> None:
     with pytest.raises(UnknownPlannerError) as info:
-        spec("aep-v3")
-    assert set(info.value.suggestions) <= {"aep-v1", "aep-v2"}
+        spec("aep-v9")
+    assert set(info.value.suggestions) <= {"aep-v1", "aep-v2", "aep-v3"}
     assert info.value.suggestions
-    assert "aep-v1, aep-v2" in str(info.value)
+    assert "aep-v1, aep-v2, aep-v3" in str(info.value)
 
 
 def test_far_from_everything_suggests_nothing() -> None:
@@ -321,7 +321,7 @@ class Wanderer(Planner):
 
 def register_planners():
     CALLS.append(1)
-    assert spec("classic").id == "classic-v1"  # the built-ins come first
+    assert spec("classic-v1").builtin  # the built-ins come first
     register("zz-wanderer", 1, Wanderer, description="from a plugin")
     register("zz-wanderer", 2, Wanderer, description="from a plugin, v2")
 '''

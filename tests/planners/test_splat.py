@@ -41,7 +41,7 @@ def _context(seed: int = 0) -> PlannerContext:
 
 
 def test_registered() -> None:
-    planner = make("splatplanner")
+    planner = make("splatplanner-v1")
     assert isinstance(planner, SplatPlanner)
     config = make("splatplanner-v1", {"sigma_position_m": 0.5}).config
     assert isinstance(config, SplatConfig)
