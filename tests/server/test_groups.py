@@ -44,7 +44,7 @@ def test_a_group_holds_one_job_per_planner(client: TestClient, tokens: Any,
     assert group["name"] == "suite one" and group["owner"] == "alice"
     assert group["status"] == "queued" and group["runs"] == 4 and group["done"] == 0
     assert group["by_status"]["queued"] == 4 and group["areas"] == ["maze"]
-    assert [p["planner"] for p in group["planners"]] == ["classic-v1", "rapid-v1"]
+    assert [p["planner"] for p in group["planners"]] == ["classic-v2", "rapid-v2"]
     assert all(p["runs"] == 2 and len(p["jobs"]) == 1 and p["simulated_s"] == 60
                for p in group["planners"])
     assert _counts(sessions) == (1, 2, 4)
@@ -66,7 +66,10 @@ def test_all_and_time_scale(client: TestClient, tokens: Any,
     assert response.status_code == 201, response.text
     group = response.json()
     planners = [p["planner"] for p in group["planners"]]
-    assert "classic-v1" in planners and len(planners) == len(set(planners)) >= 2
+    # "all" is the latest version of every registered name, one each.
+    assert "classic-v2" in planners and "classic-v1" not in planners
+    names = [p.rsplit("-v", 1)[0] for p in planners]
+    assert len(names) == len(set(names)) >= 2
     # MAZE's plateau is 700 s: one run of 7 s per planner.
     assert all(p["simulated_s"] == pytest.approx(7.0) for p in group["planners"])
     assert group["time_scale"] == 0.01 and group["seconds"] is None
@@ -90,7 +93,7 @@ def test_idempotency_key(client: TestClient, tokens: Any,
 @pytest.mark.parametrize(("changes", "needle"), [
     ({"planners": ["classic", "teleport"]}, "classic-v1"),  # lists the known planners
     ({"areas": ["maze", "atlantis"]}, "maze"),  # lists the known areas
-    ({"planners": ["classic", "classic-v1"]}, "repeat"),
+    ({"planners": ["classic", "classic-v2"]}, "repeat"),
     ({"planners": []}, "planners"),
     ({"areas": ["maze", "maze"]}, "repeat"),
     ({"areas": ["all", "maze"]}, "alone"),
@@ -202,7 +205,7 @@ def test_a_rerun_joins_the_group_in_place_of_the_job(client: TestClient, tokens:
     assert old["group_id"] == group["id"] and old["status"] == "failed"
     shown = client.get(f"/api/v1/groups/{group['id']}").json()
     assert [(p["planner"], p["jobs"]) for p in shown["planners"]] == [
-        ("classic-v1", [rerun["id"]]), ("rapid-v1", [rapid_job])]
+        ("classic-v2", [rerun["id"]]), ("rapid-v2", [rapid_job])]
     assert shown["runs"] == 4 and shown["done"] == 2 and shown["status"] == "running"
     assert shown["by_status"] == {"queued": 2, "running": 0, "succeeded": 2, "failed": 0,
                                   "cancelled": 0}
@@ -256,7 +259,7 @@ def test_flybo_benchmark_against_a_real_service(tmp_path: Path) -> None:
                                "1", "--seconds", "3", "--name", "tiny"], env=env,
                               capture_output=True, text=True, timeout=240)
         assert done.returncode == 0, done.stdout + done.stderr + _tail(logs)
-        assert "tiny): succeeded" in done.stdout and "classic-v1" in done.stdout
+        assert "tiny): succeeded" in done.stdout and "classic-v2" in done.stdout
         group = httpx.get(f"{base}/api/v1/groups/1").json()
         assert group["by_status"]["succeeded"] == 1 and group["status"] == "succeeded"
 
