@@ -22,9 +22,11 @@ import os
 import stat
 import subprocess
 import sys
+import threading
 import zipfile
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
@@ -86,6 +88,44 @@ class CheckUnavailableError(RuntimeError):
 # Runs a checked package's planner for a few simulated seconds in the sandbox
 # (`worker.sandbox.dry_run.dry_run` is one); raises `CheckUnavailableError` where it cannot.
 PlannerCheck = Callable[[PlannerPackage], CheckOutcome]
+
+
+# Uploads checked (compiled and dry-run) at once by one API process: each keeps a core busy for
+# seconds, so more would slow every check and the API with them. Per process, not per service:
+# each API process has its own count.
+MAX_CONCURRENT_CHECKS = 2
+# What a refused upload is told to wait: about one dry run of a simple planner.
+CHECKS_RETRY_AFTER_S = 15
+
+
+class ChecksBusyError(RuntimeError):
+    """As many uploads as allowed are being checked in this process (HTTP 429)."""
+
+
+class CheckSlots:
+    """At most `limit` uploads checked at once, counted across the threads of this process."""
+
+    def __init__(self, limit: int) -> None:
+        self.limit = limit
+        self._free = threading.BoundedSemaphore(limit)
+
+    @contextmanager
+    def taken(self) -> Iterator[None]:
+        """Hold a slot for the block; `ChecksBusyError` at once (no waiting) when none is
+        free, so that a burst of uploads cannot pile up threads in the API."""
+        if not self._free.acquire(blocking=False):
+            raise ChecksBusyError(
+                f"{self.limit} uploaded planners are being checked right now, the most this "
+                f"server checks at once; nothing was stored, try again in "
+                f"{CHECKS_RETRY_AFTER_S} s")
+        try:
+            yield
+        finally:
+            self._free.release()
+
+
+# The slots of this process, shared by every request thread.
+CHECK_SLOTS = CheckSlots(MAX_CONCURRENT_CHECKS)
 
 
 MAX_NAME_PART_BYTES = 255  # a file or folder name, as file systems allow

@@ -9,15 +9,21 @@ from typing import Annotated
 from fastapi import APIRouter, File, Form, HTTPException, Request, UploadFile
 from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
 
 from server.catalog import CatalogError, find_planner
 from server.deps import SessionDep, SettingsDep, UserDep
 from server.models import PlannerRow, User
 from server.planner_package import (
+    CHECK_SLOTS,
+    CHECKS_RETRY_AFTER_S,
+    CheckOutcome,
+    ChecksBusyError,
     CheckUnavailableError,
     PackageError,
     PackageLimits,
     PlannerCheck,
+    PlannerPackage,
     load_package,
 )
 from server.schemas import PlannerOut
@@ -61,6 +67,7 @@ def get_planner(name: str, session: SessionDep) -> PlannerOut:
                         409: {"description": "a built-in planner's name"},
                         413: {"description": "too large"},
                         422: {"description": "refused by the checks or the dry run"},
+                        429: {"description": "as many uploads as allowed are being checked"},
                         503: {"description": "no planner sandbox, or the store is away"}})
 def upload_planner(
     request: Request,
@@ -80,31 +87,20 @@ def upload_planner(
     if length is not None and length.isdigit() and int(length) > limits.max_upload_bytes + 65536:
         raise HTTPException(413, f"upload too large: at most {settings.max_planner_upload_mib:g}"
                                  " MiB")
-    builtin = session.scalar(select(PlannerRow).where(PlannerRow.name == name,
-                                                      PlannerRow.builtin.is_(True)))
-    if builtin is not None:
-        raise HTTPException(409, f"{name!r} is a built-in planner's name; choose another")
-    owner = session.scalar(select(PlannerRow.owner_id).where(PlannerRow.name == name))
-    if owner is not None and owner != user.id and not user.is_admin:
-        raise HTTPException(403, f"planner {name!r} belongs to another user")
+    _check_name_free(session, name, user)
     data = file.file.read(limits.max_upload_bytes + 1)
     if len(data) > limits.max_upload_bytes:
         raise HTTPException(413, f"upload too large: at most {settings.max_planner_upload_mib:g}"
                                  " MiB")
+    # The check takes seconds: no transaction (on SQLite, the write lock) is held during it.
+    session.commit()
     try:
-        package = load_package(file.filename or "", data, limits)
-    except PackageError as exc:
-        raise HTTPException(422, f"planner rejected: {exc}") from None
-    dry_run: PlannerCheck | None = request.app.state.planner_check
-    if dry_run is None:
-        raise HTTPException(503, "this service was started without the planner sandbox and "
-                                 "cannot check uploaded planners")
-    try:
-        check = dry_run(package)
-    except CheckUnavailableError as exc:
-        raise HTTPException(503, f"uploaded planners cannot be checked here: {exc}") from None
-    if not check.passed:
-        raise HTTPException(422, f"planner rejected by its dry run: {check.output[-3000:]}")
+        with CHECK_SLOTS.taken():
+            package, check = _check(request, file.filename or "", data, limits)
+    except ChecksBusyError as exc:
+        raise HTTPException(429, str(exc),
+                            headers={"Retry-After": str(CHECKS_RETRY_AFTER_S)}) from None
+    _check_name_free(session, name, user)  # another user may have taken it meanwhile
     version = (session.scalar(select(func.max(PlannerRow.version)).where(
         PlannerRow.name == name)) or 0) + 1
     key = f"planners/{name}/v{version}/code.zip"
@@ -128,3 +124,35 @@ def upload_planner(
         raise HTTPException(409, f"another version of {name!r} was stored at the same time; "
                                  "try again") from None
     return planner_out(row, user.name, for_owner=True)
+
+
+def _check_name_free(session: Session, name: str, user: User) -> None:
+    """`HTTPException` when `name` is a built-in planner's or another user's."""
+    builtin = session.scalar(select(PlannerRow).where(PlannerRow.name == name,
+                                                      PlannerRow.builtin.is_(True)))
+    if builtin is not None:
+        raise HTTPException(409, f"{name!r} is a built-in planner's name; choose another")
+    owner = session.scalar(select(PlannerRow.owner_id).where(PlannerRow.name == name))
+    if owner is not None and owner != user.id and not user.is_admin:
+        raise HTTPException(403, f"planner {name!r} belongs to another user")
+
+
+def _check(request: Request, filename: str, data: bytes,
+           limits: PackageLimits) -> tuple[PlannerPackage, CheckOutcome]:
+    """The static checks and the dry run of an upload; `HTTPException` when it is refused or
+    cannot be checked here."""
+    try:
+        package = load_package(filename, data, limits)
+    except PackageError as exc:
+        raise HTTPException(422, f"planner rejected: {exc}") from None
+    dry_run: PlannerCheck | None = request.app.state.planner_check
+    if dry_run is None:
+        raise HTTPException(503, "this service was started without the planner sandbox and "
+                                 "cannot check uploaded planners")
+    try:
+        check = dry_run(package)
+    except CheckUnavailableError as exc:
+        raise HTTPException(503, f"uploaded planners cannot be checked here: {exc}") from None
+    if not check.passed:
+        raise HTTPException(422, f"planner rejected by its dry run: {check.output[-3000:]}")
+    return package, check
