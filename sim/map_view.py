@@ -75,8 +75,8 @@ class MapView:
 
     @cached_property
     def traversable(self) -> BoolGrid:
-        """(nx, ny, nz) True where the vehicle centre may be: known free with the safety radius
-        of clearance to every unknown or occupied voxel."""
+        """(nx, ny, nz) True where the vehicle centre may be: known free, its centre the safety
+        radius or more from every point of every unknown or occupied voxel (`sim.clearance`)."""
         self._stack.traversability.update()
         return self._stack.traversability.traversable
 

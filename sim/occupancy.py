@@ -7,6 +7,47 @@ Each voxel keeps a float32 log-odds value and a uint8 `VoxelState`. A voxel is U
 ray first touches it; from then on it is OCCUPIED when its log-odds exceed the threshold and FREE
 otherwise.
 
+The update is OctoMap's (Hornung et al., Autonomous Robots 34(3), 2013; `OccupancyConfig`):
+clamped log-odds, a hit for the voxel a ray returns in, a miss for every other voxel it passes
+through; within one depth frame each voxel is updated once, and a voxel some ray returned in
+takes the hit whatever other rays passed through it (OctoMap's scan update prefers occupied
+cells over free ones). One rule is added, for surfaces thinner than a voxel:
+
+**A seen surface is taken away only by a ray through where it was seen.** Every voxel also keeps
+where in it rays have returned: the running mean of one return point per frame (the first ray's
+of the frame to return there), to 1/256 of the voxel per axis, over the last 16 or so frames,
+and how many returns that mean holds. Once a voxel holds returns from two or more frames, a ray
+passing through it counts as a miss only if it passes within `OccupancyConfig.miss_radius_m` of
+that mean and runs on past it by more than the radius plus twice the range noise at the ray's
+length (`OccupancyConfig.range_noise`); rays that pass elsewhere through the voxel, or return
+within that margin of the mean, leave it alone. A miss that drives the voxel down to
+`clamp_min` forgets its returns. Why:
+
+- Thin surfaces. A rail, wire or plate edge fills a few centimetres of a 10-20 cm voxel. In
+  OctoMap's model every ray through the rest of the voxel is a miss: seen from 4-5 m, where rays
+  are about 10 cm apart and more of them pass a 5 cm rail's voxel than hit it, the voxel loses
+  more than it gains and is cleared within about nine frames (`docs/notes/2026-11-safety-stops.md`).
+  A ray passing beside the rail says nothing about the rail. The radius, 1 cm, is half the width
+  of the thinnest parts the areas hold (the 2 cm flanges of steel columns, 2.4 cm handles): a
+  ray that close to a point on the middle of such a part hits it.
+- Range noise. Depth noise puts a thin surface's own returns up to a few centimetres behind it
+  (sigma 4 cm at 5 m, `sim.noise`), often in the next voxel; their rays pass the surface's
+  returns and must not count against them.
+- Speckle. A single return proves nothing: a voxel with a return from one frame only (a
+  depth-noise outlier in free space, in front of a wall say) takes every miss, as in OctoMap,
+  and the next frames' rays clear it as before. A voxel that collected returns in two or more
+  frames is cleared by rays that pass within the radius of their mean: within a few frames when
+  seen from a metre or two, slowly when seen only from 4-5 m, where rays are 8-10 cm apart and
+  a wall's range noise (3-4 cm) puts returns in the voxel in front of it
+  (`docs/notes/2026-12-map-fidelity.md` has the measurements).
+
+The rule is a hard-threshold form of the miss update of NDT occupancy maps (Saarinen et al.,
+IJRR 32(14), 2013), which weighs the miss of a ray through a cell by how likely the ray passes
+through the Gaussian of the points seen in the cell, reduced here to the points' mean and a
+radius; voxblox (Oleynikova et al., IROS 2017) answers the same fading of thin and sparse
+surfaces by the free-space parts of rays passing through their voxels with a larger weight for
+near-surface observations (its `sparsity_compensation_factor`).
+
 Consumers that derive data from the states (frontiers, clearance) follow changes through
 `DirtyBoxSubscription`: every subscription accumulates the bounding box of the voxels whose
 state changed since its own last `take()`, so several consumers can be refreshed from the same
@@ -22,7 +63,8 @@ import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from sim.geometry import FloatArray
-from sim.occupancy_kernels import _ray_voxels, integrate_rays
+from sim.noise import DepthNoiseConfig
+from sim.occupancy_kernels import FRESH_TAG, _ray_voxels, decode_returns, integrate_rays
 from sim.voxel_grid import (
     BoolArray,
     DirtyBoxSubscription,
@@ -45,16 +87,21 @@ __all__ = [
 
 
 class OccupancyConfig(BaseModel):
-    """Log-odds sensor model.
+    """Log-odds sensor model (see the module docstring for the surface-evidence rule).
 
     Attributes:
         log_odds_hit: added to the voxel holding a ray's return.
-        log_odds_miss: added to every voxel a ray passes through before its end.
+        log_odds_miss: added to every voxel a ray passes through before its end (a voxel holding
+            returns: only by rays through where they lie).
         clamp_min: lower bound of the log-odds, so free space can turn occupied again quickly.
         clamp_max: upper bound of the log-odds.
         occupied_threshold: a known voxel is OCCUPIED when its log-odds is > this, else FREE.
         clear_max_range: rays without a return (hit False) carve free space up to their end,
             end voxel included; when False such rays are ignored.
+        miss_radius_m: a voxel holding returns from two or more frames takes a miss only from a
+            ray passing within this distance of their mean.
+        range_noise: the range noise the map allows for beyond a voxel's returns (twice its
+            sigma at the ray's length); the benchmark camera's by default. Disabled: none.
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid")
@@ -65,6 +112,8 @@ class OccupancyConfig(BaseModel):
     clamp_max: float = 3.5
     occupied_threshold: float = 0.0
     clear_max_range: bool = True
+    miss_radius_m: float = Field(0.01, gt=0.0)
+    range_noise: DepthNoiseConfig = DepthNoiseConfig()
 
     @model_validator(mode="after")
     def _ordered_bounds(self) -> OccupancyConfig:
@@ -73,7 +122,12 @@ class OccupancyConfig(BaseModel):
         return self
 
 
-
+# Frames with returns a voxel needs before rays passing beside them stop counting as misses.
+MIN_RETURNS = 2
+# The mean of a voxel's returns averages about this many of the latest ones.
+_WINDOW = 16
+# Returns within this many sigmas of range noise beyond a voxel's returns agree with them.
+_NOISE_SIGMAS = 2.0
 
 
 def _empty_box() -> IndexArray:
@@ -89,8 +143,6 @@ def _to_index_box(box: IndexArray) -> IndexBox | None:
         (int(box[0]), int(box[1]), int(box[2])),
         (int(box[3]) + 1, int(box[4]) + 1, int(box[5]) + 1),
     )
-
-
 
 
 class OccupancyMap:
@@ -122,7 +174,10 @@ class OccupancyMap:
         self._log_odds = np.zeros(self._shape, dtype=np.float32)
         self._state = np.zeros(self._shape, dtype=np.uint8)
         self._known = 0
-        self._stamp = np.full(self._log_odds.size, -1, dtype=np.int64)
+        # Per voxel the last batch that touched it and where rays returned in it (the layout
+        # is `sim.occupancy_kernels`').
+        self._voxels = np.zeros((self._log_odds.size, 2), dtype=np.uint32)
+        self._voxels[:, 0] = FRESH_TAG
         self._batch = 0
         self._last_touched: IndexBox | None = None
         self._subscriptions: weakref.WeakSet[DirtyBoxSubscription] = weakref.WeakSet()
@@ -166,8 +221,20 @@ class OccupancyMap:
 
     @property
     def last_touched_box(self) -> IndexBox | None:
-        """Box of every voxel the last `integrate` updated (None if it updated none)."""
+        """Box of every voxel the rays of the last `integrate` visited, so of every voxel it
+        updated (None if they visited none)."""
         return self._last_touched
+
+    def returns(self, idx: npt.ArrayLike) -> tuple[FloatArray, npt.NDArray[np.int64]]:
+        """Where rays have returned in the in-grid voxels `idx` (K, 3): the mean return point
+        (K, 3), world metres (to 1/256 of the voxel; NaN where the voxel holds none), and how
+        many returns, one per frame, that mean holds (K,), saturating at its window (16)."""
+        i = np.asarray(idx, dtype=np.int64).reshape(-1, 3)
+        flat = np.ravel_multi_index(tuple(i.T), self._shape)
+        inside, count = decode_returns(self._voxels[flat, 1])
+        points = self._origin + (i + inside) * self._voxel_size
+        points[count == 0] = np.nan
+        return points, count
 
     def copy_state(self) -> StateGrid:
         """(nx, ny, nz) uint8 writable copy of the states."""
@@ -203,15 +270,20 @@ class OccupancyMap:
         if not self.config.clear_max_range:
             ends, hits = np.ascontiguousarray(ends[hits]), hits[hits]
         cfg = self.config
+        noise = cfg.range_noise
         touched = _empty_box()
         changed = _empty_box()
         self._batch += 1
+        if self._batch >= 1 << 30:
+            raise RuntimeError("more than 2^30 integrations into one occupancy map")
         newly = int(
             integrate_rays(
                 o, ends, hits, np.ascontiguousarray(self._origin), self._voxel_size,
                 self._log_odds, self._state,
                 cfg.log_odds_hit, cfg.log_odds_miss, cfg.clamp_min, cfg.clamp_max,
-                cfg.occupied_threshold, touched, changed, self._stamp, self._batch,
+                cfg.occupied_threshold, cfg.miss_radius_m / self._voxel_size,
+                _NOISE_SIGMAS if noise.enabled else 0.0, noise.sigma_a, noise.sigma_b, noise.z0,
+                MIN_RETURNS, _WINDOW, touched, changed, self._voxels, self._batch,
             )
         )
         self._known += newly

@@ -163,27 +163,57 @@ def _unflatten(v: int, ny: int, nz: int) -> tuple[int, int, int]:
     return i, q - i * ny, v - q * nz
 
 
+# Per voxel the kernel keeps two uint32 (`integrate_rays`' `voxels`, (nx*ny*nz, 2), one cache
+# line): the tag of the last batch that touched the voxel, and its returns: bits 0-23 the mean
+# of the points where rays returned in it, 8 bits per axis in 1/256ths of the voxel edge (value q
+# stands for (q + 0.5) / 256), bits 24-28 how many returns that mean holds (so that a voxel holds
+# at least n returns exactly when the word is at least n << 24, below `SETTLED`).
+FRESH_TAG = (1 << 32) - 1  # a voxel never touched; tags stay below it
+# The returns word of a voxel that misses drove to the log-odds floor: FREE, no returns, and no
+# miss can change it, so the hot loop skips it after one read.
+SETTLED = 1 << 31
+_COUNT_SHIFT = 24
+_COUNT_MASK = 31
+_POS_STEPS = 256.0
+# 1 / n for the running mean over n returns.
+_INVERSE = np.array([0.0] + [1.0 / n for n in range(1, _COUNT_MASK + 1)])
+
+
+@numba.njit(cache=True, inline="always")
+def _quantise(f: float) -> int:
+    """A position in [0, 1) of a voxel's edge to 0..255."""
+    return min(max(int(f * _POS_STEPS), 0), 255)
+
+
 @numba.njit(cache=True)
 def integrate_rays(
     origin: FloatArray, endpoints: FloatArray, hit: BoolArray,
     grid_origin: FloatArray, voxel_size: float,
     log_odds: LogOddsGrid, state: StateGrid,
     l_hit: float, l_miss: float, l_min: float, l_max: float, threshold: float,
+    miss_radius: float, noise_sigmas: float, noise_a: float, noise_b: float, noise_z0: float,
+    min_returns: int, window: int,
     touched: IndexArray, changed: IndexArray,
-    stamp: npt.NDArray[np.int64], batch: int,
+    voxels: npt.NDArray[np.uint32], batch: int,
 ) -> int:
     """Update the grid with a batch of rays sharing one origin (one depth frame).
 
     Each voxel is updated at most once per batch, and hits win (as OctoMap does): a voxel in
-    which any ray ends on a surface gets `l_hit`; every other in-grid voxel that some ray passes
-    through, or ends in without a return, gets `l_miss`. Without this, the many grazing rays of
-    one frame that pass through a wall's surface voxel would outvote the rays that hit it and
-    carve holes in walls. Log-odds are clamped to [l_min, l_max]. Rays with a non-finite
-    endpoint are skipped; parts of rays outside the grid are skipped; the origin may lie outside.
+    which any ray ends on a surface gets `l_hit`. Every other in-grid voxel that some ray passes
+    through, or ends in without a return, gets `l_miss` - unless the voxel holds returns from
+    at least `min_returns` batches: then only a ray that passes within `miss_radius` of their
+    mean and, if it has a return, runs on past that point by more than `miss_radius` plus
+    `noise_sigmas` standard deviations of the range noise at its length, counts as a miss; rays
+    passing elsewhere through the voxel leave it alone (the model and its reasons are
+    `sim.occupancy`'s). A miss that brings a voxel to `l_min` forgets its returns. Each batch
+    adds one return to the mean of each voxel rays returned in (that of the first such ray).
+    Log-odds are clamped to [l_min, l_max]. Rays with a non-finite endpoint are skipped; parts of
+    rays outside the grid are skipped; the origin may lie outside.
 
-    `stamp` (nx*ny*nz,) int64 holds, per voxel, the last batch tag that touched it; `batch` must
-    grow from call to call (tags 3*batch: hit pending, 3*batch+1: miss applied, 3*batch+2: hit
-    applied).
+    `voxels` (nx*ny*nz, 2) uint32 holds, per voxel, the tag of the last batch that touched it
+    and its returns (layout above; `FRESH_TAG` and 0 for a voxel never touched). `batch` must
+    grow from call to call and stay below 2^30 (tags 4*batch: hit pending, 4*batch+1: miss
+    applied, 4*batch+2: hit applied, 4*batch+3: hit applied and return recorded).
 
     Args:
         origin: (3,) float64 sensor position, world metres.
@@ -192,7 +222,13 @@ def integrate_rays(
         grid_origin: (3,) float64 lower corner of voxel (0, 0, 0).
         log_odds: (nx, ny, nz) float32 C-contiguous, updated in place.
         state: (nx, ny, nz) uint8 C-contiguous `VoxelState`, updated in place.
-        touched: (6,) int64 min i, j, k then max i, j, k of all updated voxels, grown in place.
+        miss_radius: voxels.
+        noise_a, noise_b, noise_z0: range noise sigma(L) = a + b (L - z0)^2, metres.
+        min_returns: at most 31.
+        window: the mean is a running mean of the first `window` returns, then moves by
+            1/window of each new return's offset (at most 31).
+        touched: (6,) int64 min i, j, k then max i, j, k of all voxels the rays visited, grown
+            in place.
         changed: (6,) int64 the same for voxels whose state changed, grown in place.
 
     Returns:
@@ -201,16 +237,21 @@ def integrate_rays(
     nx, ny, nz = log_odds.shape
     flat_l = log_odds.reshape(-1)
     flat_s = state.reshape(-1)
+    words = voxels.reshape(-1)
     buf = np.empty(nx + ny + nz + 3, dtype=np.int64)
     ax = (origin[0] - grid_origin[0]) / voxel_size
     ay = (origin[1] - grid_origin[1]) / voxel_size
     az = (origin[2] - grid_origin[2]) / voxel_size
     if not (math.isfinite(ax) and math.isfinite(ay) and math.isfinite(az)):
         return 0
+    radius_sq = miss_radius * miss_radius
+    floor_l = np.float32(l_min)
+    protected = min_returns << _COUNT_SHIFT
     newly = 0
-    hit_tag = 3 * batch
-    miss_tag = 3 * batch + 1
-    done_tag = 3 * batch + 2
+    hit_tag = 4 * batch
+    miss_tag = 4 * batch + 1
+    done_tag = 4 * batch + 2
+    recorded_tag = 4 * batch + 3
     # First pass: the voxels where rays end on a surface, so that the second pass skips them.
     for r in range(endpoints.shape[0]):
         if not hit[r]:
@@ -225,32 +266,71 @@ def integrate_rays(
         ey = math.floor(by)
         ez = math.floor(bz)
         if 0 <= ex < nx and 0 <= ey < ny and 0 <= ez < nz:
-            stamp[(ex * ny + ey) * nz + ez] = hit_tag
+            words[2 * ((ex * ny + ey) * nz + ez)] = hit_tag
     for r in range(endpoints.shape[0]):
         bx = (endpoints[r, 0] - grid_origin[0]) / voxel_size
         by = (endpoints[r, 1] - grid_origin[1]) / voxel_size
         bz = (endpoints[r, 2] - grid_origin[2]) / voxel_size
         if not (math.isfinite(bx) and math.isfinite(by) and math.isfinite(bz)):
             continue
-        count, _, fi, fj, fk, li, lj, lk = _traverse(ax, ay, az, bx, by, bz, nx, ny, nz, buf)
+        count, end_in, fi, fj, fk, li, lj, lk = _traverse(ax, ay, az, bx, by, bz, nx, ny, nz,
+                                                          buf)
         if count == 0:
             continue
+        dx = bx - ax
+        dy = by - ay
+        dz = bz - az
+        # How far past a voxel's returns this ray must run to contradict them, in voxels;
+        # worked out when the ray first meets such a voxel (-1 until then).
+        margin = -1.0
+        length = 0.0
         first_change = -1
         last_change = -1
         # Inline rather than a per-voxel function call: this loop is the hot path.
         for c in range(count):
             v = buf[c]
-            tag = stamp[v]
-            if tag in (miss_tag, done_tag):
-                continue
+            tag = np.int64(words[2 * v])
+            returns = np.int64(0)
             if tag == hit_tag:
                 delta = l_hit
-                stamp[v] = done_tag
+                words[2 * v] = done_tag
+            elif hit_tag < tag <= recorded_tag:
+                continue  # updated in this batch already
             else:
+                returns = np.int64(words[2 * v + 1])
+                if returns == SETTLED:
+                    continue  # FREE at the floor, no returns: a miss changes nothing
+                if returns >= protected:
+                    # A surface seen here: only a ray through where it was seen contradicts it.
+                    if margin < 0.0:
+                        length = math.sqrt(dx * dx + dy * dy + dz * dz)
+                        margin = 0.0
+                        if hit[r]:
+                            range_m = length * voxel_size - noise_z0
+                            sigma_m = noise_a + noise_b * range_m * range_m
+                            margin = miss_radius + noise_sigmas * sigma_m / voxel_size
+                    i, j, k = _unflatten(v, ny, nz)
+                    wx = i + ((returns & 255) + 0.5) / _POS_STEPS - ax
+                    wy = j + (((returns >> 8) & 255) + 0.5) / _POS_STEPS - ay
+                    wz = k + (((returns >> 16) & 255) + 0.5) / _POS_STEPS - az
+                    # t: where along the ray (0 at the origin, 1 at its end) it passes nearest.
+                    t = (wx * dx + wy * dy + wz * dz) / (length * length) if length > 0.0 \
+                        else 0.0
+                    if hit[r] and (1.0 - t) * length <= margin:
+                        continue  # the ray returned there, within the noise
+                    t = min(max(t, 0.0), 1.0)
+                    wx -= t * dx
+                    wy -= t * dy
+                    wz -= t * dz
+                    if wx * wx + wy * wy + wz * wz > radius_sq:
+                        continue  # it passed beside what was seen
                 delta = l_miss
-                stamp[v] = miss_tag
+                words[2 * v] = miss_tag
             new = np.float32(min(max(flat_l[v] + delta, l_min), l_max))
             flat_l[v] = new
+            if delta < 0.0 and new <= floor_l:
+                # A miss drove the voxel to the floor: it forgets its returns.
+                words[2 * v + 1] = SETTLED
             # The state follows the stored float32, so state == (log_odds > threshold).
             s_new = _OCCUPIED if new > threshold else _FREE
             s_old = flat_s[v]
@@ -261,6 +341,29 @@ def integrate_rays(
                 if first_change < 0:
                     first_change = c
                 last_change = c
+        if hit[r] and end_in:
+            v = buf[count - 1]
+            if words[2 * v] == done_tag:
+                # The first ray of the batch to return in this voxel: add its return to the
+                # running mean of where in the voxel rays return.
+                words[2 * v] = recorded_tag
+                returns = np.int64(words[2 * v + 1])
+                n = min(int((returns >> _COUNT_SHIFT) & _COUNT_MASK) + 1, window)
+                ex = math.floor(bx)
+                ey = math.floor(by)
+                ez = math.floor(bz)
+                qx = _quantise(bx - ex)
+                qy = _quantise(by - ey)
+                qz = _quantise(bz - ez)
+                if n > 1:
+                    w = _INVERSE[n]
+                    px = int(returns & 255)
+                    py = int((returns >> 8) & 255)
+                    pz = int((returns >> 16) & 255)
+                    qx = px + math.floor((qx - px) * w + 0.5)
+                    qy = py + math.floor((qy - py) * w + 0.5)
+                    qz = pz + math.floor((qz - pz) * w + 0.5)
+                words[2 * v + 1] = (n << _COUNT_SHIFT) | (qz << 16) | (qy << 8) | qx
         # A DDA path is monotone on every axis, so the first and last of any of its voxels
         # bound all of them.
         _grow_box(touched, fi, fj, fk)
@@ -271,6 +374,15 @@ def integrate_rays(
             i, j, k = _unflatten(buf[last_change], ny, nz)
             _grow_box(changed, i, j, k)
     return newly
+
+
+def decode_returns(returns: npt.NDArray[np.uint32]) -> tuple[FloatArray, npt.NDArray[np.int64]]:
+    """(K, 3) mean return positions inside their voxels, in voxel edges (0..1), and (K,) how
+    many returns they hold, from the voxels' return words (K,)."""
+    w = np.asarray(returns, dtype=np.int64)
+    count = (w >> _COUNT_SHIFT) & _COUNT_MASK
+    q = np.stack([(w >> (8 * a)) & 255 for a in range(3)], axis=-1)
+    return (q + 0.5) / _POS_STEPS, count
 
 
 @numba.njit(cache=True)

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import numpy.typing as npt
 import pytest
-from scipy.spatial import cKDTree
 
 from sim.clearance import TraversabilityTracker
 from sim.frontiers import FrontierTracker
@@ -28,16 +29,21 @@ def reference_frontier(state: npt.NDArray[np.uint8]) -> BoolGrid:
 
 
 def reference_traversable(m: OccupancyMap, radius_m: float) -> BoolGrid:
-    """Brute force: distance from each FREE centre to the nearest non-FREE or outside centre."""
-    shape = np.array(m.shape)
-    shell = np.argwhere(np.pad(np.zeros(m.shape, dtype=bool), 1, constant_values=True)) - 1
-    obstacles = np.concatenate([np.argwhere(m.state != VoxelState.FREE), shell])
-    free = np.argwhere(m.state == VoxelState.FREE)
-    dist, _ = cKDTree(obstacles * m.voxel_size).query(free * m.voxel_size)
-    result = np.zeros(tuple(shape), dtype=bool)
-    ok = free[dist >= radius_m - 1e-9]
-    result[ok[:, 0], ok[:, 1], ok[:, 2]] = True
-    return result
+    """Brute force over every offset d within the radius plus one voxel: the distance from a
+    voxel centre to the cube of the voxel d away is max(|d| - 1/2, 0) per axis, and a FREE
+    voxel is traversable when no non-FREE or outside voxel at an offset nearer than the radius
+    exists (`sim.clearance` measures to obstacle cubes)."""
+    radius = radius_m / m.voxel_size
+    reach = int(np.ceil(radius)) + 1
+    blocked = np.pad(m.state != VoxelState.FREE, reach, constant_values=True)
+    near = np.zeros(m.shape, dtype=bool)
+    nx, ny, nz = m.shape
+    for d in itertools.product(range(-reach, reach + 1), repeat=3):
+        gap = np.maximum(np.abs(np.array(d)) - 0.5, 0.0)
+        if np.sqrt((gap**2).sum()) < radius - 1e-9:
+            near |= blocked[reach + d[0]:reach + d[0] + nx, reach + d[1]:reach + d[1] + ny,
+                            reach + d[2]:reach + d[2] + nz]
+    return (m.state == VoxelState.FREE) & ~near
 
 
 def integrate_random(m: OccupancyMap, rng: np.random.Generator, rays: int,
@@ -144,10 +150,12 @@ def test_small_clusters_are_dropped_and_order_is_deterministic() -> None:
 
 def test_free_voxel_next_to_unknown_is_not_traversable() -> None:
     m = half_free_map()
-    trav = TraversabilityTracker(m, radius_m=0.3).traversable
+    trav = TraversabilityTracker(m, radius_m=0.25).traversable
     assert m.state[4, 5, 5] == VoxelState.FREE and m.state[5, 5, 5] == VoxelState.UNKNOWN
     assert not trav[4, 5, 5]
-    # A centre exactly 0.3 m from the unknown and from the grid's faces still fits.
+    # A centre exactly 0.25 m from the unknown voxels' cubes and from the grid's faces still
+    # fits (clearance is measured to obstacle cubes; 0.3 m no longer fits in 0.5 m of free space).
+    assert not TraversabilityTracker(m, radius_m=0.3).traversable.any()
     expected = np.zeros(m.shape, dtype=bool)
     expected[2, 2:8, 2:8] = True
     np.testing.assert_array_equal(trav, expected)

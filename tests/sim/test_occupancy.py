@@ -7,6 +7,7 @@ import numpy.typing as npt
 import pytest
 from pydantic import ValidationError
 
+from sim.noise import DepthNoiseConfig
 from sim.occupancy import IndexBox, OccupancyConfig, OccupancyMap, VoxelState
 
 IntArray = npt.NDArray[np.int64]
@@ -335,3 +336,214 @@ def test_hits_win_within_one_batch() -> None:
     assert m.log_odds[10, 10, 10] == pytest.approx(
         m.config.log_odds_hit + m.config.log_odds_miss, abs=1e-6
     )
+
+
+# The surface-evidence rule (`sim.occupancy`): a voxel holding returns from two or more frames
+# takes a miss only from a ray through where they lie.
+
+FLOOR = np.array([0.0, 0.0, 0.0])
+X = np.array([1.0, 0.0, 0.0])
+Y = np.array([0.0, 1.0, 0.0])
+
+
+def line_map(config: OccupancyConfig | None = None) -> OccupancyMap:
+    """A 40 x 20 x 20 grid of 0.1 m voxels from the world origin."""
+    return OccupancyMap(FLOOR, (40, 20, 20), 0.1, config)
+
+
+def test_the_mean_of_the_returns_is_kept_one_per_frame() -> None:
+    m = line_map()
+    origin = np.array([0.05, 1.05, 1.05])
+    voxel = np.array([25, 10, 10])
+    inside = np.array([[0.2, 0.3, 0.4], [0.6, 0.5, 0.8], [0.7, 0.1, 0.6]])
+    points = (voxel + inside) * 0.1
+    for n, p in enumerate(points, start=1):
+        # A second ray returning in the same voxel in the same frame is not recorded.
+        m.integrate(origin, [p, (voxel + 0.5) * 0.1], [True, True])
+        mean, count = m.returns(voxel[None])
+        assert count[0] == n
+        np.testing.assert_allclose(mean[0], points[:n].mean(axis=0), atol=0.1 / 256 * n)
+    mean, count = m.returns([[24, 10, 10]])
+    assert count[0] == 0 and np.all(np.isnan(mean[0]))
+    # The count saturates at the window; from then on the mean follows the latest returns.
+    far = (voxel + 0.9) * 0.1
+    for _ in range(40):
+        m.integrate(origin, [far], [True])
+    mean, count = m.returns(voxel[None])
+    assert count[0] == 16
+    np.testing.assert_allclose(mean[0], far, atol=0.1 * 0.05)
+
+
+def seen_twice(m: OccupancyMap, point: npt.NDArray[np.float64]) -> None:
+    """Two frames of a return at `point` from the -x side, so its voxel holds returns from two
+    frames and is occupied."""
+    for _ in range(2):
+        m.integrate(point - np.array([2.0, 0.0, 0.0]), point[None], [True])
+
+
+def test_rays_passing_beside_seen_returns_leave_them() -> None:
+    """A thin vertical surface at x = 2.52 seen twice from -x: rays from -y passing 3 cm beside
+    the returns' mean and on to the far wall do not count as misses; one through the mean does,
+    once per frame."""
+    m = line_map()
+    p = np.array([2.52, 1.03, 1.04])  # in voxel (25, 10, 10)
+    seen_twice(m, p)
+    idx = (25, 10, 10)
+    before = m.log_odds[idx]
+    assert before == pytest.approx(2 * m.config.log_odds_hit)
+    origin = np.array([p[0] + 0.03, 0.05, p[2]])
+    beside = np.array([[p[0] + 0.03, 1.95, p[2]], [p[0] + 0.015, 1.95, p[2] - 0.01]])
+    for _ in range(5):
+        m.integrate(origin, beside, [True, True])
+    assert m.log_odds[idx] == before
+    assert m.state[idx] == VoxelState.OCCUPIED
+    # Their voxels on the way that held no returns were freed as usual.
+    assert m.state[25, 5, 10] == VoxelState.FREE
+    through = np.array([p[0], 0.05, p[2]])
+    m.integrate(through, [[p[0], 1.95, p[2]], [p[0] + 0.002, 1.95, p[2]]], [True, True])
+    assert m.log_odds[idx] == pytest.approx(before + m.config.log_odds_miss)
+
+
+def test_a_voxel_with_returns_from_one_frame_takes_every_miss() -> None:
+    """Depth-noise speckle: returns in one frame only (however many) do not protect a voxel."""
+    m = line_map()
+    p = np.array([2.52, 1.03, 1.04])
+    m.integrate(p - 2.0 * X, [p, p + 0.001], [True, True])
+    idx = (25, 10, 10)
+    assert m.state[idx] == VoxelState.OCCUPIED
+    origin = np.array([p[0] + 0.04, 0.05, p[2]])
+    for _ in range(3):
+        m.integrate(origin, [[p[0] + 0.04, 1.95, p[2]]], [True])
+    assert m.state[idx] == VoxelState.FREE
+    assert m.log_odds[idx] == pytest.approx(m.config.log_odds_hit + 3 * m.config.log_odds_miss)
+
+
+def test_returns_within_the_range_noise_beyond_the_mean_agree_with_it() -> None:
+    """A ray through the mean that returns just beyond it (range noise of the same surface) is
+    no miss; one that runs on well past it is. At 3 m the margin is 1 cm plus twice sigma(3 m),
+    about 3.8 cm."""
+    m = line_map()
+    p = np.array([3.08, 1.05, 1.05])  # near the far face of voxel (30, 10, 10)
+    seen_twice(m, p)
+    idx = (30, 10, 10)
+    before = m.log_odds[idx]
+    origin = p - np.array([3.0, 0.0, 0.0])
+    m.integrate(origin, [p + 0.03 * X], [True])  # returns in voxel 31, 3 cm beyond
+    assert m.log_odds[idx] == before
+    m.integrate(origin, [p + 0.06 * X], [True])
+    assert m.log_odds[idx] == pytest.approx(before + m.config.log_odds_miss)
+    # Without range noise the margin is the radius alone.
+    exact = line_map(OccupancyConfig(range_noise=DepthNoiseConfig(enabled=False)))
+    seen_twice(exact, p)
+    exact.integrate(origin, [p + 0.03 * X], [True])
+    assert exact.log_odds[idx] == pytest.approx(before + m.config.log_odds_miss)
+    # A ray without a return passing through the mean is a miss wherever it ends.
+    m.integrate(origin, [p + 0.001 * X], [False])
+    assert m.log_odds[idx] == pytest.approx(before + 2 * m.config.log_odds_miss)
+
+
+def test_a_voxel_driven_to_the_floor_forgets_its_returns() -> None:
+    m = line_map()
+    p = np.array([2.55, 1.05, 1.05])
+    seen_twice(m, p)
+    idx = (25, 10, 10)
+    origin = p - np.array([2.0, 0.0, 0.0])
+    cfg = m.config
+    steps = int(np.ceil((2 * cfg.log_odds_hit - cfg.clamp_min) / -cfg.log_odds_miss))
+    for _ in range(steps):
+        assert m.returns([idx])[1][0] == 2
+        m.integrate(origin, [p + 1.0 * X], [True])  # through the mean
+    assert m.log_odds[idx] == np.float32(cfg.clamp_min)
+    assert m.returns([idx])[1][0] == 0
+    # New returns start a new mean; one frame of them protects nothing yet.
+    m.integrate(origin, [p + 0.03 * X], [True])
+    assert m.returns([idx])[1][0] == 1
+    m.integrate(p + 0.04 * X - Y, [p + 0.04 * X + Y], [True])
+    assert m.log_odds[idx] == pytest.approx(cfg.clamp_min + cfg.log_odds_hit
+                                            + cfg.log_odds_miss)
+
+
+def reference_integrate(ref: dict[str, npt.NDArray[np.float64]], m: OccupancyMap,
+                        origin: npt.NDArray[np.float64], ends: npt.NDArray[np.float64],
+                        hit: npt.NDArray[np.bool_]) -> None:
+    """The update rule of `sim.occupancy`, voxel by voxel over `reference_voxels` paths:
+    `ref` holds "log_odds" (nx, ny, nz), "mean" (nx, ny, nz, 3) in 1/256ths of the voxel and
+    "count" (nx, ny, nz)."""
+    cfg, vs = m.config, m.voxel_size
+    lo, mean, count = ref["log_odds"], ref["mean"], ref["count"]
+    in_grid = [m.in_bounds(m.world_to_index(e)) and h for e, h in zip(ends, hit, strict=True)]
+    hit_voxels = {tuple(m.world_to_index(e)) for e, ok in zip(ends, in_grid, strict=True) if ok}
+    done: set[tuple[int, ...]] = set()
+    recorded: set[tuple[int, ...]] = set()
+    a = (origin - m.origin) / vs
+    for e, h, ok in zip(ends, hit, in_grid, strict=True):
+        b = (e - m.origin) / vs
+        d = b - a
+        length = float(np.linalg.norm(d))
+        sigma = cfg.range_noise.sigma_a + cfg.range_noise.sigma_b * (
+            length * vs - cfg.range_noise.z0) ** 2
+        margin = (cfg.miss_radius_m + 2.0 * sigma) / vs
+        for v in map(tuple, reference_voxels(origin, e, m)):
+            if v in done:
+                continue
+            if v in hit_voxels:
+                delta = cfg.log_odds_hit
+            else:
+                if count[v] >= 2:
+                    p = np.array(v) + (mean[v] + 0.5) / 256.0
+                    t = float((p - a) @ d) / length**2 if length > 0 else 0.0
+                    if h and (1.0 - t) * length <= margin:
+                        continue
+                    nearest = a + min(max(t, 0.0), 1.0) * d
+                    if np.linalg.norm(p - nearest) > cfg.miss_radius_m / vs:
+                        continue
+                delta = cfg.log_odds_miss
+            done.add(v)
+            lo[v] = np.float32(min(max(lo[v] + delta, cfg.clamp_min), cfg.clamp_max))
+            if delta < 0 and lo[v] <= np.float32(cfg.clamp_min):
+                count[v] = 0
+        if ok:
+            v = tuple(m.world_to_index(e))
+            if v not in recorded:
+                recorded.add(v)
+                q = np.minimum(np.floor((b - np.floor(b)) * 256.0), 255.0)
+                n = min(count[v] + 1, 16)
+                mean[v] = q if n == 1 else mean[v] + np.floor((q - mean[v]) / n + 0.5)
+                count[v] = n
+
+
+def test_the_kernel_matches_a_reference_of_the_rule_on_random_frames() -> None:
+    """Random frames whose returns fall on a few 'surface' points, so that voxels collect
+    returns over frames; a 4 cm radius so that random rays pass within it."""
+    rng = np.random.default_rng(11)
+    cfg = OccupancyConfig(miss_radius_m=0.04)
+    m = OccupancyMap(ORIGIN, (14, 12, 8), VOXEL, cfg)
+    ref = {"log_odds": np.zeros(m.shape), "mean": np.zeros((*m.shape, 3)),
+           "count": np.zeros(m.shape, dtype=np.int64)}
+    size = np.array(m.shape) * VOXEL
+    surface = m.origin + rng.uniform(0.1, size - 0.1, size=(12, 3))
+    protected_misses = 0
+    for _ in range(60):
+        origin = m.origin + rng.uniform(-0.3, size + 0.3)
+        n = int(rng.integers(5, 60))
+        ends = surface[rng.integers(len(surface), size=n)] + rng.normal(0.0, 0.02, (n, 3))
+        free_ends = rng.uniform(m.origin - 0.2, m.origin + size + 0.2, size=(n, 3))
+        hit = rng.random(n) < 0.6
+        ends = np.where(hit[:, None], ends, free_ends)
+        before = ref["log_odds"].copy()
+        m.integrate(origin, ends, hit)
+        reference_integrate(ref, m, origin, ends, hit)
+        protected_misses += int(np.count_nonzero((ref["log_odds"] < before) & (ref["count"] >= 2)))
+        np.testing.assert_array_equal(m.log_odds, ref["log_odds"].astype(np.float32))
+        idx = np.argwhere(np.ones(m.shape, dtype=bool))
+        mean, count = m.returns(idx)
+        np.testing.assert_array_equal(count, ref["count"].reshape(-1))
+        held = count > 0
+        expected = m.origin + (idx + (ref["mean"].reshape(-1, 3) + 0.5) / 256.0) * VOXEL
+        np.testing.assert_allclose(mean[held], expected[held], atol=1e-9)
+        known = m.state != VoxelState.UNKNOWN
+        np.testing.assert_array_equal(m.state[known] == VoxelState.OCCUPIED,
+                                      m.log_odds[known] > cfg.occupied_threshold)
+    # Both branches of the rule were exercised.
+    assert protected_misses > 0
+    assert np.count_nonzero(ref["count"] >= 2) > 5

@@ -1,10 +1,12 @@
-"""The in-flight check: obstacles found since a plan was accepted, near the rest of its path."""
+"""The in-flight check: obstacles found since a plan was accepted, near the rest of its path
+(measured to the obstacle voxels' cubes, as the traversable mask is)."""
 
 from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
 import pytest
+from scipy.optimize import minimize_scalar
 
 from sim.occupancy import VoxelState
 from sim.search_checks import path_meets_new_obstacle
@@ -14,21 +16,32 @@ ORIGIN = np.array([-1.0, -2.0, 0.0])
 SHAPE = (30, 24, 12)
 
 
-def _segment_distance(p: npt.NDArray[np.float64], a: npt.NDArray[np.float64],
-                      b: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    ab = b - a
-    t = np.zeros(len(p)) if not ab.any() else np.clip((p - a) @ ab / (ab @ ab), 0.0, 1.0)
-    return np.asarray(np.linalg.norm(p - (a + t[:, None] * ab), axis=1))
+def _segment_cube_distance(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64],
+                           lo: npt.NDArray[np.float64], size: float) -> float:
+    """Distance between the segment a→b and the cube [lo, lo + size]^3, by minimising the
+    (convex) point-to-cube distance along the segment."""
+    def dist(t: float) -> float:
+        p = a + t * (b - a)
+        return float(np.linalg.norm(np.maximum(np.maximum(lo - p, p - (lo + size)), 0.0)))
+    best = minimize_scalar(dist, bounds=(0.0, 1.0), method="bounded",
+                           options={"xatol": 1e-12})
+    return min(float(best.fun), dist(0.0), dist(1.0))
 
 
 def _reference(state: npt.NDArray[np.uint8], before: npt.NDArray[np.uint8],
-               points: npt.NDArray[np.float64], reach_m: float) -> bool:
+               points: npt.NDArray[np.float64], reach_m: float) -> bool | None:
+    """Whether a newly occupied voxel's cube lies nearer than `reach_m` to the polyline; None
+    when one lies within a micrometre of the reach (too close to call)."""
     new = np.argwhere((state == VoxelState.OCCUPIED) & (before != VoxelState.OCCUPIED))
-    centres = ORIGIN + (new + 0.5) * VOXEL
+    corners = ORIGIN + new * VOXEL
+    found = False
     for a, b in zip(np.vstack([points[:1], points[:-1]]), points, strict=True):
-        if len(centres) and (_segment_distance(centres, a, b) < reach_m).any():
-            return True
-    return False
+        for lo in corners:
+            d = _segment_cube_distance(a, b, lo, VOXEL)
+            if abs(d - reach_m) < 1e-6:
+                return None
+            found |= d < reach_m
+    return found
 
 
 @pytest.mark.parametrize("seed", range(40))
@@ -47,7 +60,8 @@ def test_matches_a_brute_force_reference(seed: int) -> None:
     points = rng.uniform(ORIGIN - 0.2, upper + 0.2, size=(int(rng.integers(1, 5)), 3))
     reach = float(rng.choice([0.1, 0.25, 0.39]))
     expected = _reference(state, before, points, reach)
-    assert path_meets_new_obstacle(state, before, ORIGIN, VOXEL, reach, points) == expected
+    if expected is not None:
+        assert path_meets_new_obstacle(state, before, ORIGIN, VOXEL, reach, points) == expected
 
 
 def test_an_obstacle_on_the_path_is_found_and_one_beside_it_only_within_reach() -> None:
@@ -59,11 +73,13 @@ def test_an_obstacle_on_the_path_is_found_and_one_beside_it_only_within_reach() 
     assert path_meets_new_obstacle(on_path, before, ORIGIN, VOXEL, 0.45, path)
     # Already in the map the plan was checked against: not new.
     assert not path_meets_new_obstacle(on_path, on_path, ORIGIN, VOXEL, 0.45, path)
+    # Reach is measured to the voxel's cube, not its centre.
     beside = before.copy()
-    beside[14, 12, 5] = VoxelState.OCCUPIED  # its centre 0.4 m from the path
-    assert path_meets_new_obstacle(beside, before, ORIGIN, VOXEL, 0.45, path)
-    assert not path_meets_new_obstacle(beside, before, ORIGIN, VOXEL, 0.3, path)
+    beside[14, 12, 5] = VoxelState.OCCUPIED  # its cube 0.35 m from the path, its centre 0.4 m
+    assert path_meets_new_obstacle(beside, before, ORIGIN, VOXEL, 0.36, path)
+    assert not path_meets_new_obstacle(beside, before, ORIGIN, VOXEL, 0.34, path)
     # Past the end of the path it does not count.
     ahead = before.copy()
-    ahead[10, 20, 5] = VoxelState.OCCUPIED  # its centre 0.5 m beyond the path's end
-    assert not path_meets_new_obstacle(ahead, before, ORIGIN, VOXEL, 0.45, path)
+    ahead[10, 21, 5] = VoxelState.OCCUPIED  # its cube 0.55 m beyond the path's end
+    assert not path_meets_new_obstacle(ahead, before, ORIGIN, VOXEL, 0.5, path)
+    assert path_meets_new_obstacle(ahead, before, ORIGIN, VOXEL, 0.6, path)
