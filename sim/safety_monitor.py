@@ -8,7 +8,6 @@ map the plan was checked on.
 
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
@@ -45,10 +44,10 @@ class SafetyMonitor:
         flight.checked_at_update = occupancy_updates
         t0 = time.perf_counter()
         occ = self.mapping.occupancy
-        # Only what the vehicle could touch: a surface in a voxel lies within half the voxel's
-        # diagonal of its centre; stopping for everything within the safety radius would stop
-        # flights for walls beside the path.
-        reach = self.cfg.limits.radius_m + 0.5 * math.sqrt(3.0) * occ.voxel_size
+        # Only what the vehicle could touch: a voxel's cube within its radius of the path;
+        # stopping for everything within the safety radius would stop flights for walls beside
+        # the path.
+        reach = self.cfg.limits.radius_m
         blocked = path_meets_new_obstacle(occ.state, flight.checked_on, occ.origin,
                                           occ.voxel_size, reach, self.rest_of_path(flight, now))
         self.costs.checks += time.perf_counter() - t0
