@@ -16,16 +16,13 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
 from pydantic import ValidationError
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from flybo.errors import CliError
-from flybo.record import reproducibility_record
 from flybo.service_cli import add_service_commands, check_planner, run_service_command
-from worker.result_folder import MESH, RECORDING, RESULT, ResultFolderError, write_result_folder
 
 __all__ = ["CliError", "main"]
 
@@ -160,7 +157,12 @@ def _import_area(args: argparse.Namespace) -> None:
     size = " x ".join(f"{v:.3g}" for v in area.extent)
     print(f"imported {area.name}: {len(area.triangles)} faces, {size} m, "
           f"observable volume {truth.observable_volume_m3:.1f} m³, "
-          f"start {np.round(area.start.position, 2).tolist()}, plateau {area.plateau_s:g} s")
+          f"start {_rounded(area.start.position)}, plateau {area.plateau_s:g} s")
+
+
+def _rounded(position: Any) -> list[float]:
+    """A position to the centimetre, printed as a list."""
+    return [round(float(v), 2) for v in position]
 
 
 def _load_named_area(name: str) -> Area:
@@ -199,7 +201,7 @@ def _show_area(name: str) -> None:
         ("indoor / outdoor", "indoor" if area.info.indoor else "outdoor", None),
         ("voxel size (m)", f"{area.voxel_size:g}", None),
         ("plateau (s)", f"{area.plateau_s:g}", None),
-        ("start", f"{np.round(area.start.position, 2).tolist()}, yaw {area.start.yaw:.2f}",
+        ("start", f"{_rounded(area.start.position)}, yaw {area.start.yaw:.2f}",
          None),
     ]
     print(f"{area.info.title} ({area.name})")
@@ -251,8 +253,10 @@ def _list_presets() -> None:
 def _run(args: argparse.Namespace) -> None:
     # The simulation stack: on use.
     from areas import UnknownAreaError, load_area, load_ground_truth
+    from flybo.record import reproducibility_record
     from planners.registry import PlannerConfigError, UnknownPlannerError, make, spec
     from sim.config import UnknownPresetError, preset
+    from worker.result_folder import ResultFolderError, write_result_folder
 
     try:
         area = load_area(args.area)
@@ -302,6 +306,7 @@ def _run_with_progress(
     staging: Path,
 ) -> EpisodeResult:
     from sim.episode import run_episode  # the simulation stack: on use
+    from worker.result_folder import RECORDING
 
     seconds = args.seconds if args.seconds is not None else area.plateau_s
     recording = staging / RECORDING
@@ -325,6 +330,8 @@ def _run_with_progress(
 
 
 def _print_summary(payload: dict[str, Any], out: Path) -> None:
+    from worker.result_folder import MESH, RECORDING, RESULT  # numpy: on use
+
     surface = payload["surface"]
     timing = payload["planning_time_ms"]
 

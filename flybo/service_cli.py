@@ -9,11 +9,7 @@ unless it flies or checks a planner.
 from __future__ import annotations
 
 import argparse
-import contextlib
-import ctypes
 import os
-import signal
-import subprocess
 import sys
 import time
 import uuid
@@ -49,6 +45,7 @@ def add_service_commands(sub: Any) -> None:
     serve.add_argument("--port", type=int, default=8000)
     serve.add_argument("--workers", type=int, default=1,
                        help="worker processes to start beside the API (default 1; 0: none)")
+    _threads_option(serve, "each worker process")
     serve.add_argument("--demo", action="store_true",
                        help="create a 'demo' user and submit a short MAZE + Classic job")
     serve.add_argument("--no-viewer", action="store_true",
@@ -65,6 +62,7 @@ def add_service_commands(sub: Any) -> None:
     worker = sub.add_parser("worker", help="a Celery worker that runs queued runs")
     worker.add_argument("--concurrency", type=int, default=1,
                         help="runs at once in this worker (default 1)")
+    _threads_option(worker, "each of its --concurrency pool processes")
     worker.add_argument("--loglevel", default="INFO")
     tokens = sub.add_parser("tokens", help="API tokens")
     tokens_sub = tokens.add_subparsers(dest="tokens_command", required=True)
@@ -104,6 +102,14 @@ def add_service_commands(sub: Any) -> None:
                          help="the benchmark version whose results to rank (default: the "
                               "service's current one)")
     _add_suite_commands(sub, client)
+
+
+def _threads_option(parser: argparse.ArgumentParser, who: str) -> None:
+    parser.add_argument("--threads-per-worker", type=int, default=None, metavar="N",
+                        help=f"threads of Open3D, numba and BLAS in {who} (default: the "
+                             "usable cores shared out evenly, at least 1; env "
+                             "FLYBO_WORKER_THREADS; OMP_NUM_THREADS and the other libraries' "
+                             "own variables, when set, win)")
 
 
 def _add_suite_commands(sub: Any, client: Any) -> None:
@@ -213,6 +219,14 @@ def _tokens(args: argparse.Namespace) -> None:
 def _worker(args: argparse.Namespace) -> None:
     if args.concurrency < 1:
         raise CliError("--concurrency must be at least 1")
+    from worker.threads import ThreadSettingError, limit_this_process, threads_per_worker
+
+    # First: the libraries read their thread limits as they load, in this process or in the
+    # pool processes forked from it (`flybo serve` sets them in this one's environment).
+    try:
+        limit_this_process(threads_per_worker(args.concurrency, args.threads_per_worker))
+    except ThreadSettingError as exc:
+        raise CliError(str(exc)) from None
     _migrated(_settings())
     from server.queue import QUEUE  # Celery; importing the worker's app configures it
     from worker.celery_app import app
@@ -256,17 +270,18 @@ def _serve(args: argparse.Namespace) -> None:
     import uvicorn  # the whole service (API, pages, sandbox): only when serving
 
     from flybo.app import create_app
+    from flybo.worker_processes import start_workers, stop_workers
     from server.app import MAX_CONCURRENT_REQUESTS
+    from worker.threads import ThreadSettingError
 
     if not 0 < args.port < 65536:
         raise CliError(f"--port must be 1-65535, got {args.port}")
     settings = _settings()
     factory = _migrated(settings)
-    # Each worker leads its own process group (Celery's pool processes included), so that
-    # stopping the service can stop all of them; and it is told to stop if the service dies.
-    workers = [subprocess.Popen([sys.executable, "-m", "flybo", "worker"],
-                                start_new_session=True, preexec_fn=_stop_with_parent)
-               for _ in range(max(args.workers, 0))]
+    try:
+        workers = start_workers(args.workers, args.threads_per_worker)
+    except ThreadSettingError as exc:
+        raise CliError(str(exc)) from None
     url = f"http://{args.host}:{args.port}"
     viewer = None
     if not args.no_viewer:
@@ -295,23 +310,7 @@ def _serve(args: argparse.Namespace) -> None:
     finally:
         if viewer is not None:
             viewer.stop()
-        for proc in workers:
-            proc.send_signal(signal.SIGTERM)
-        deadline = time.monotonic() + 20.0
-        for proc in workers:
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                proc.wait(timeout=max(deadline - time.monotonic(), 0.1))
-            # A run still flying is given back to the queue (acks late) and flown again later.
-            with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
-
-
-def _stop_with_parent() -> None:
-    """In a worker before it starts: SIGTERM when the service process dies (Linux)."""
-    pr_set_pdeathsig = 1
-    with contextlib.suppress(OSError, AttributeError):
-        ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, signal.SIGTERM)
+        stop_workers(workers)
 
 
 def _demo(factory: sessionmaker[Session], settings: Settings, url: str) -> None:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -358,3 +360,16 @@ def test_areas_build_fills_the_cache(tmp_path: Path, monkeypatch: pytest.MonkeyP
         assert png.read_bytes().startswith(b"\x89PNG")
     main(["areas", "build", "maze"])
     assert "(cached)" in capsys.readouterr().out
+
+
+# -- start-up ------------------------------------------------------------------------------------
+
+
+def test_the_command_loads_no_numerical_library_before_a_command_runs() -> None:
+    """`flybo worker` sets the thread limits first thing, and OpenMP, OpenBLAS and numba read
+    them when they load: loaded by the command line itself, they would keep every core."""
+    probe = ("import sys, flybo.cli; print(','.join(m for m in ('numpy', 'numba', 'open3d', "
+             "'scipy') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         check=True, timeout=120)
+    assert out.stdout.strip() == ""

@@ -63,6 +63,7 @@ from server.settings import Settings
 from server.storage import ArtifactStore, ArtifactStoreError, StoredArtifact, settings_store
 from worker.result_folder import RECORDING, write_result_folder
 from worker.sandbox.isolation import SandboxLimits
+from worker.threads import limit_open3d, thread_report
 
 if TYPE_CHECKING:
     from areas import Area
@@ -336,6 +337,8 @@ def _fly_and_store(factory: sessionmaker[Session], settings: Settings, held: Cla
              held.attempt, worker_name(), spec.planner, spec.area, spec.seed, spec.preset,
              spec.seconds)
     try:
+        limit_open3d()  # before the first ray: Open3D's oneTBB reads no environment variable
+        log.info("run %s %s", held.run_id, thread_report())
         area = _load_area(spec, store, settings.areas_dir)
         result = _simulate(spec, area, tmp, beat, store, settings)
         outcome = result.status.value

@@ -1,0 +1,164 @@
+"""Two workers against one, with and without the thread limit per worker process.
+
+    .venv/bin/python benchmarks/worker_scaling.py [--areas maze offices-a] [--episodes 8]
+        [--seconds 60] [--planner classic] [--rounds 2]
+
+A "worker" here is a process started with the environment `flybo serve --workers N` gives
+each worker (`flybo.worker_processes.worker_environment`), or, without the limit, with the
+thread variables removed (every library then uses every core). Each worker loads the areas,
+flies a 5 s MAZE warm-up (the compiled kernels), limits Open3D as a run in `flybo worker` does
+(`worker.threads.limit_open3d`), then waits; when all are ready they take the `--episodes`
+episodes (the areas in turn, default preset, seeds 0, 1, ...) from one shared queue, one at a
+time, as workers take runs. The time measured is from the start signal to the last episode's
+end. Speedup: one worker's time over two workers' time, for the same episodes. Rounds
+alternate the four set-ups, so that drift in the machine's speed falls on all of them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from benchmarks.common import print_table, write_json
+from flybo.worker_processes import worker_environment
+from worker.threads import LIBRARY_VARIABLES, THREADS_ENV, usable_cores
+
+SETUPS = ((1, False), (1, True), (2, False), (2, True))  # (workers, limited)
+
+
+def _child(folder: Path, planner: str, seconds: float) -> None:
+    """One worker: warm up, report ready, wait for the start, fly queued episodes."""
+    from areas import load_area, load_ground_truth
+    from planners.registry import make, spec
+    from sim.config import preset
+    from sim.episode import run_episode
+    from worker.threads import limit_open3d, thread_report
+
+    limit_open3d()
+    config = preset("default")
+    planner_id = spec(planner).id
+    tasks = json.loads((folder / "tasks.json").read_text())
+    areas = {name: load_area(name) for name in {t["area"] for t in tasks} | {"maze"}}
+    truths = {name: load_ground_truth(area) for name, area in areas.items()}
+    run_episode(areas["maze"], truths["maze"], make(planner), config, 0, planner_name=planner_id,
+                preset_name="default", seconds=5.0)
+    (folder / f"ready-{os.getpid()}").write_text(thread_report())
+    while not (folder / "go").exists():
+        time.sleep(0.01)
+    done = []
+    for index, task in enumerate(tasks):
+        try:  # the claim: one rename wins
+            os.rename(folder / "queue" / str(index), folder / "queue" / f"{index}.{os.getpid()}")
+        except FileNotFoundError:
+            continue
+        wall0, cpu0 = time.perf_counter(), time.process_time()
+        run_episode(areas[task["area"]], truths[task["area"]], make(planner), config,
+                    task["seed"], planner_name=planner_id, preset_name="default",
+                    seconds=seconds)
+        done.append({**task, "wall_s": time.perf_counter() - wall0,
+                     "cpu_s": time.process_time() - cpu0, "end": time.time()})
+    (folder / f"done-{os.getpid()}.json").write_text(json.dumps(done))
+
+
+def _environment(workers: int, limited: bool) -> dict[str, str]:
+    if limited:
+        return worker_environment(workers)
+    return {k: v for k, v in os.environ.items() if k not in (*LIBRARY_VARIABLES, THREADS_ENV)}
+
+
+def _measure(args: argparse.Namespace, workers: int, limited: bool) -> dict[str, Any]:
+    """The K episodes flown by `workers` worker processes; their time from the start signal."""
+    with tempfile.TemporaryDirectory(prefix="flybo-scaling-") as name:
+        folder = Path(name)
+        tasks = [{"area": args.areas[i % len(args.areas)], "seed": i // len(args.areas)}
+                 for i in range(args.episodes)]
+        (folder / "tasks.json").write_text(json.dumps(tasks))
+        (folder / "queue").mkdir()
+        for index in range(len(tasks)):
+            (folder / "queue" / str(index)).touch()
+        command = [sys.executable, __file__, "--child", str(folder), "--planner", args.planner,
+                   "--seconds", str(args.seconds)]
+        env = _environment(workers, limited)
+        procs = [subprocess.Popen(command, env=env) for _ in range(workers)]
+        while len(list(folder.glob("ready-*"))) < workers:
+            if any(p.poll() not in (None, 0) for p in procs):
+                raise SystemExit("a worker process failed while starting")
+            time.sleep(0.05)
+        threads = sorted({p.read_text() for p in folder.glob("ready-*")})
+        start = time.time()
+        (folder / "go").touch()
+        for proc in procs:
+            if proc.wait() != 0:
+                raise SystemExit(f"a worker process failed ({proc.returncode})")
+        episodes = [e for p in folder.glob("done-*.json") for e in json.loads(p.read_text())]
+    return {"workers": workers, "limited": limited, "threads": threads,
+            "wall_s": max(e["end"] for e in episodes) - start,
+            "episode_wall_s": sum(e["wall_s"] for e in episodes),
+            "cpu_s": sum(e["cpu_s"] for e in episodes), "episodes": episodes}
+
+
+def _label(workers: int, limited: bool) -> str:
+    return f"{workers} worker{'s' if workers > 1 else ''}, " + ("limited" if limited else
+                                                              "no limit")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--areas", nargs="+", default=["maze", "offices-a"])
+    parser.add_argument("--episodes", type=int, default=8)
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--planner", default="classic")
+    parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--child", type=Path, default=None, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child is not None:
+        _child(args.child, args.planner, args.seconds)
+        return
+    if args.rounds < 1 or args.episodes < 2 or args.seconds <= 0:
+        parser.error("--rounds must be at least 1, --episodes 2 and --seconds positive")
+    measured: dict[tuple[int, bool], list[dict[str, Any]]] = {s: [] for s in SETUPS}
+    rows = []
+    for round_ in range(1, args.rounds + 1):
+        for workers, limited in SETUPS:
+            m = _measure(args, workers, limited)
+            measured[workers, limited].append(m)
+            rows.append([round_, _label(workers, limited), f"{m['wall_s']:.1f}",
+                         f"{m['cpu_s']:.1f}", f"{m['cpu_s'] / m['wall_s']:.2f}",
+                         f"{args.episodes * args.seconds / m['wall_s']:.1f}"])
+            print(f"round {round_} {_label(workers, limited)}: {m['wall_s']:.1f} s  "
+                  f"({'; '.join(m['threads'])})", flush=True)
+    print_table(f"{args.episodes} x {args.seconds:g} s of {args.planner} on "
+                f"{', '.join(args.areas)}, {usable_cores()} usable cores",
+                ["round", "set-up", "wall s", "CPU s", "cores busy", "sim s / wall s"], rows)
+    wall = {s: statistics.mean(m["wall_s"] for m in ms) for s, ms in measured.items()}
+    ratios = {
+        "2 vs 1 worker, limited (flybo serve now)": wall[1, True] / wall[2, True],
+        "2 vs 1 worker, no limit (before)": wall[1, False] / wall[2, False],
+        "2 limited vs 1 without limit": wall[1, False] / wall[2, True],
+        "2 workers: limited over no limit": wall[2, False] / wall[2, True],
+        "1 worker: limited over no limit": wall[1, False] / wall[1, True],
+    }
+    print_table("speedup (mean wall times; > 1: the first set-up is faster)",
+                ["comparison", "speedup"], [[k, f"{v:.2f}x"] for k, v in ratios.items()])
+    path = write_json("worker_scaling", {
+        "areas": args.areas, "episodes": args.episodes, "seconds": args.seconds,
+        "planner": args.planner, "rounds": args.rounds, "usable_cores": usable_cores(),
+        "load_average_after": os.getloadavg(),
+        "mean_wall_s": {_label(*s): v for s, v in wall.items()}, "speedup": ratios,
+        "measurements": {_label(*s): ms for s, ms in measured.items()}})
+    print(f"\nwritten {path}")
+
+
+if __name__ == "__main__":
+    main()
