@@ -15,6 +15,7 @@ from planners.aep import Aep, AepV1, AepV3
 from planners.api import Planner
 from planners.classic import Classic, ClassicV2
 from planners.esm import Esm, EsmRecon
+from planners.fuel import Fuel
 from planners.nbvp import Nbvp
 from planners.rapid import Rapid, RapidV2
 from planners.registry import register
@@ -27,6 +28,8 @@ _SPLAT_REFERENCE = ("A. Brunel, A. Bourki, C. Demonceaux, O. Strauss, SplatPlann
                     "autonomous exploration via permutohedral frontier filtering, ICRA 2021")
 _AEP_REFERENCE = ("M. Selin, M. Tiger, D. Duberg, F. Heintz, P. Jensfelt, Efficient "
                   "autonomous exploration planning of large-scale 3-D environments, RA-L 2019")
+_FUEL_REFERENCE = ("B. Zhou, Y. Zhang, X. Chen, S. Shen, FUEL: fast UAV exploration using "
+                   "incremental frontier structure and hierarchical planning, RA-L 2021")
 _ESM_REFERENCE = ("L. Schmid, M. Pantic, R. Khanna, L. Ott, R. Siegwart, J. Nieto, An efficient "
                   "sampling-based method for online informative path planning in unknown "
                   "environments, RA-L 2020")
@@ -104,6 +107,13 @@ BUILTINS: tuple[tuple[str, int, type[Planner], str, str], ...] = (
         "ESM with a reconstruction gain: surface voxels seen by few fused frames or "
         "from few directions, plus unknown volume, per second of flight.",
         _ESM_REFERENCE,
+    ),
+    (
+        "fuel", 1, Fuel,
+        "Frontier clusters with coverage-ranked viewpoints, a global ATSP tour over their "
+        "best viewpoints by flight time, the next few clusters' viewpoints refined by a graph "
+        "search; replanned in flight.",
+        _FUEL_REFERENCE,
     ),
 )
 
