@@ -29,8 +29,10 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
+from typing import Literal
 
 from pydantic import BaseModel, Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
 
 COMPILED_SUFFIXES = {".pyc", ".pyo", ".so", ".pyd", ".dll", ".dylib", ".o", ".a", ".exe",
                      ".whl", ".egg", ".jar", ".class", ".bin"}
@@ -88,6 +90,36 @@ class CheckUnavailableError(RuntimeError):
 # Runs a checked package's planner for a few simulated seconds in the sandbox
 # (`worker.sandbox.dry_run.dry_run` is one); raises `CheckUnavailableError` where it cannot.
 PlannerCheck = Callable[[PlannerPackage], CheckOutcome]
+
+
+class SandboxPolicy(BaseSettings):
+    """How uploaded code may run, read from the environment like `server.settings.Settings`
+    (`FLYBO_*`): by the API at start-up and by the sandbox at each use."""
+
+    model_config = SettingsConfigDict(env_prefix="FLYBO_", extra="ignore")
+
+    environment: Literal["development", "production"] = "development"
+    sandbox_allow_insecure: bool = Field(
+        default=False,
+        description="run uploaded planners even without full isolation (development only: "
+                    "the fallback does not contain hostile code)")
+
+
+class SandboxPolicyError(RuntimeError):
+    """The sandbox settings are not allowed in this environment (the insecure fallback in
+    production): the service does not start, and uploaded code does not run."""
+
+
+def insecure_sandbox_refusal(environment: str | None = None) -> str | None:
+    """Why the sandbox settings are refused, or None. `environment` is the service's
+    (`Settings.environment`); without it, `FLYBO_ENVIRONMENT` is read."""
+    policy = SandboxPolicy()
+    if policy.sandbox_allow_insecure and (environment or policy.environment) == "production":
+        return ("FLYBO_SANDBOX_ALLOW_INSECURE is set while FLYBO_ENVIRONMENT=production: the "
+                "insecure fallback runs uploaded planners without containing them and is for "
+                "development only; unset it and give this machine the full sandbox "
+                "(docs/sandbox.md)")
+    return None
 
 
 # Uploads checked (compiled and dry-run) at once by one API process: each keeps a core busy for

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import logging
 import tempfile
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, HTTPException, Request, UploadFile
+from fastapi import APIRouter, FastAPI, File, Form, HTTPException, Request, UploadFile
 from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
@@ -24,12 +27,29 @@ from server.planner_package import (
     PackageLimits,
     PlannerCheck,
     PlannerPackage,
+    SandboxPolicyError,
+    insecure_sandbox_refusal,
     load_package,
 )
 from server.schemas import PlannerOut
+from server.settings import Settings
 from server.storage import ArtifactStoreError, settings_store
 
-router = APIRouter(prefix="/planners", tags=["planners"])
+log = logging.getLogger(__name__)
+
+
+@asynccontextmanager
+async def _refuse_insecure_sandbox(app: FastAPI) -> AsyncIterator[None]:
+    """Start-up: the insecure sandbox fallback is refused in production, before any upload."""
+    settings: Settings = app.state.settings
+    refusal = insecure_sandbox_refusal(settings.environment)
+    if refusal is not None:
+        log.critical("refusing to start: %s", refusal)
+        raise SandboxPolicyError(refusal)
+    yield
+
+
+router = APIRouter(prefix="/planners", tags=["planners"], lifespan=_refuse_insecure_sandbox)
 
 
 def planner_out(row: PlannerRow, owner: str | None, *, for_owner: bool = False) -> PlannerOut:

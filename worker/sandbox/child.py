@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import os
+import shutil
 import sys
 import time
 import traceback
@@ -152,17 +153,27 @@ def _serve(reader: IO[bytes], writer: IO[bytes], map_path: str, planner: Any) ->
         write_message(writer, reply)
 
 
+def seed_cache(seed: str) -> None:
+    """Copy the project's compiled numba kernels from `seed` (read-only) into the writable
+    `NUMBA_CACHE_DIR`, before anything compiles: numba uses only a cache it may write to."""
+    cache = os.environ.get("NUMBA_CACHE_DIR")
+    if cache and os.path.isdir(seed):
+        shutil.copytree(seed, cache, dirs_exist_ok=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--fd-in", type=int, required=True)
     parser.add_argument("--fd-out", type=int, required=True)
     parser.add_argument("--map", required=True)
+    parser.add_argument("--numba-seed", required=True)
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument("--code")
     source.add_argument("--builtin")
     args = parser.parse_args()
     reader = os.fdopen(args.fd_in, "rb")
     writer = os.fdopen(args.fd_out, "wb")
+    seed_cache(args.numba_seed)
     # The framework's own modules load before the hook, so that it judges planner code only.
     import planners.api  # noqa: F401
     import worker.sandbox.mirror  # noqa: F401

@@ -19,6 +19,7 @@ from pydantic import BaseModel
 from sim.camera import CameraConfig
 from sim.geometry import Pose
 from sim.interface import Observation, Plan, PlannerContext, PlanOutcome
+from sim.occupancy import IndexBox
 from sim.vehicle import VehicleLimits
 
 MAX_MESSAGE_BYTES = 8 * 1024 * 1024
@@ -190,3 +191,35 @@ def decode_plan(data: Any) -> Plan:
             clean[str(key)[:64]] = value if math.isfinite(value) else None
     values["info"] = clean
     return Plan(**values)
+
+
+# What the planner process reports of a call, ms: refreshing its map and the planner's `plan`.
+TIMING_KEYS = ("map", "plan")
+
+
+def clean_timing(timing: Any) -> dict[str, float]:
+    """The known keys of a reply's untrusted `timing_ms`, finite non-negative numbers only."""
+    if not isinstance(timing, dict):
+        return {}
+    clean = {}
+    for key in TIMING_KEYS:
+        value = timing.get(key)
+        if (isinstance(value, int | float) and not isinstance(value, bool)
+                and math.isfinite(value) and value >= 0):
+            clean[key] = float(value)
+    return clean
+
+
+def box_message(box: IndexBox | None) -> list[list[int]] | None:
+    """A box of changed voxels as sent: its lower and upper corners, or None."""
+    return None if box is None else [list(box.lo), list(box.hi)]
+
+
+# The area's name as the planner process is told it: the name would let a planner that knows
+# the built-in areas rebuild the exact scene, ground truth included.
+HIDDEN_AREA = "hidden"
+
+
+def hide_area(ctx: PlannerContext) -> PlannerContext:
+    """`ctx` without the area's name, for the planner process."""
+    return dataclasses.replace(ctx, area=HIDDEN_AREA)

@@ -9,11 +9,8 @@ reason for the run's record; the planner's stderr tail goes to the run log only.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import logging
-import math
 import os
-import select
 import shutil
 import signal
 import subprocess
@@ -29,41 +26,38 @@ import numpy as np
 from sim.interface import Observation, Plan, PlannerContext
 from sim.map_view import MapView
 from sim.occupancy import DirtyBoxSubscription, IndexBox
-from worker.sandbox import isolation
+from worker.sandbox import cpu_usage, isolation
+from worker.sandbox.exit_reasons import exit_reason, stderr_tail
 from worker.sandbox.isolation import SandboxLimits
+from worker.sandbox.pipe import (
+    ClosedError,
+    ReadTimeoutError,
+    StalledError,
+    TooLargeError,
+    read_line,
+    write_all,
+)
 from worker.sandbox.protocol import (
+    HIDDEN_AREA,
     MAX_MESSAGE_BYTES,
     ProtocolError,
+    box_message,
+    clean_timing,
     decode_plan,
     encode_context,
     encode_message,
     encode_observation,
+    hide_area,
     parse_message,
 )
 
+__all__ = ["HIDDEN_AREA", "SandboxError", "SandboxedPlanner", "clean_timing", "hide_area"]
+
 log = logging.getLogger(__name__)
-STDERR_TAIL_BYTES = 4000
-_SIGNALS = {signal.SIGXCPU: "exceeded its CPU time limit",
-            signal.SIGXFSZ: "exceeded its file size limit (too much output)",
-            signal.SIGSEGV: "crashed (segmentation fault)"}
-
-
-# The area's name as the planner process is told it: the name would let a planner that knows
-# the built-in areas rebuild the exact scene, ground truth included.
-HIDDEN_AREA = "hidden"
-
-
-def hide_area(ctx: PlannerContext) -> PlannerContext:
-    """`ctx` without the area's name, for the planner process."""
-    return dataclasses.replace(ctx, area=HIDDEN_AREA)
 
 
 class SandboxError(RuntimeError):
     """The sandboxed planner failed; the message is the reason recorded for the run."""
-
-
-class _StalledError(Exception):
-    """The pipe to the planner process stayed full until the call's deadline."""
 
 
 class SandboxedPlanner:
@@ -151,33 +145,20 @@ class SandboxedPlanner:
         shutil.rmtree(self.shm_dir, ignore_errors=True)
 
     def cpu_seconds(self) -> float:
-        """CPU seconds (user + system) the sandbox has used so far, as the kernel counts them.
+        """CPU seconds the sandbox has used so far, as the kernel counts them: every thread of
+        bubblewrap, the planner process and anything it started (`cpu_usage.cpu_seconds`).
 
-        Every thread of every process of the sandbox counts: bubblewrap and the planner process,
-        and anything the planner started, found through the sandbox's cgroup and through the
-        process tree below the started process. Each process's count in `/proc/PID/stat`
-        covers all its threads (the exited ones too) plus its children it has waited for. The
-        episode runner charges a `plan` call the difference of this before and after it; the
-        planner's own report of its time is never used. Never decreases (a process that ended
-        between two readings is not subtracted); 0 before the sandbox starts.
-        """
+        The episode runner charges a `plan` call the difference of this before and after it;
+        the planner's own report of its time is never used. Never decreases (a process that
+        ended between two readings is not subtracted); 0 before the sandbox starts."""
         if self.proc is None or self.proc.returncode is not None:
             return self._cpu_seconds  # not started, or ended and reaped: its pid may be reused
-        pids = _descendants(self.proc.pid)
-        if self.cgroups is not None:
-            for path in self.cgroups.paths:
-                pids.update(_cgroup_pids(path))
-        ticks = sum(_cpu_ticks(pid) for pid in pids)
-        self._cpu_seconds = max(self._cpu_seconds, ticks / _CLOCK_TICKS)
+        cgroups = self.cgroups.paths if self.cgroups is not None else []
+        self._cpu_seconds = max(self._cpu_seconds, cpu_usage.cpu_seconds(self.proc.pid, cgroups))
         return self._cpu_seconds
 
     def stderr_tail(self) -> str:
-        try:
-            with self.stderr_path.open("rb") as fh:
-                fh.seek(max(0, self.stderr_path.stat().st_size - STDERR_TAIL_BYTES))
-                return fh.read().decode(errors="replace")
-        except OSError:
-            return ""
+        return stderr_tail(self.stderr_path)
 
     def _start(self) -> None:
         """Start the planner process and load the planner (not charged to planning time)."""
@@ -185,21 +166,23 @@ class SandboxedPlanner:
             raise SandboxError(self._failure)
         map_file = self.shm_dir / "map.u8"
         os.chmod(self.shm_dir, 0o755)  # the map file appears here at the first `plan`
-        child_map, child_code = isolation.child_paths(self.iso, work=self.work, code=self.code,
-                                                      map_file=map_file)
+        numba_seed = isolation.seed_numba_cache(self.tmp / "numba-seed")
+        child_map, child_seed, child_code = isolation.child_paths(
+            self.iso, numba_seed=numba_seed, code=self.code, map_file=map_file)
         to_child_r, to_child_w = os.pipe()
         from_child_r, from_child_w = os.pipe()
         source = ["--code", child_code] if child_code else ["--builtin", str(self.builtin)]
         args = isolation.command(
-            self.iso, work=self.work, code=self.code, map_dir=self.shm_dir,
+            self.iso, self.limits, numba_seed=numba_seed, code=self.code, map_dir=self.shm_dir,
             child_args=["--fd-in", str(to_child_r), "--fd-out", str(from_child_w),
-                        "--map", child_map, *source])
-        numba_cache = isolation.seed_numba_cache(self.work)
+                        "--map", child_map, "--numba-seed", child_seed, *source])
         self.cgroups = isolation.make_cgroups(self.iso, self.limits)
+        # Without bubblewrap (built-in planners, the insecure fallback) the working folder is
+        # `self.work` on the host; with it, this environment is replaced by `--clearenv`.
         env = {"PATH": "/usr/bin:/bin", "HOME": str(self.work),
                "PYTHONPATH": isolation.python_path(), "OMP_NUM_THREADS": "1",
                "NUMBA_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
-               "NUMBA_CACHE_DIR": str(numba_cache)}
+               "NUMBA_CACHE_DIR": str(self.work / ".numba-cache")}
         with self.stderr_path.open("wb") as err:
             self.proc = subprocess.Popen(
                 args, stdin=subprocess.DEVNULL, stdout=err, stderr=err, env=env,
@@ -249,8 +232,8 @@ class SandboxedPlanner:
                                  "voxel_size": view.voxel_size}}, "reset")
             self.reset_cpu_seconds = self.cpu_seconds() - before
             self._pending_reset = False
-            message = {"op": "plan", "obs": encode_observation(obs), "box": _box_message(box),
-                       "surface_box": _box_message(surface_box)}
+            message = {"op": "plan", "obs": encode_observation(obs), "box": box_message(box),
+                       "surface_box": box_message(surface_box)}
             reply = self._call(message, "plan")
             self._sync_thread = threading.Thread(target=self._sync_loop, args=(view,),
                                                  name="sandbox-map-sync", daemon=True)
@@ -260,8 +243,8 @@ class SandboxedPlanner:
 
             def with_changes() -> dict[str, Any]:
                 changed, surface_changed = self._copy_changes(view)
-                return {"op": "plan", "obs": obs_message, "box": _box_message(changed),
-                        "surface_box": _box_message(surface_changed)}
+                return {"op": "plan", "obs": obs_message, "box": box_message(changed),
+                        "surface_box": box_message(surface_changed)}
 
             reply = self._call(with_changes, "plan")
         timing = reply.get("timing_ms")
@@ -295,10 +278,10 @@ class SandboxedPlanner:
                 box, surface = self._copy_changes(view)
                 if box is None and surface is None:
                     continue
-                data = encode_message({"op": "sync", "box": _box_message(box),
-                                       "surface_box": _box_message(surface)})
+                data = encode_message({"op": "sync", "box": box_message(box),
+                                       "surface_box": box_message(surface)})
                 self._write(data, time.monotonic() + self.limits.plan_timeout_s)
-            except _StalledError:
+            except StalledError:
                 self._stalled()
                 return  # the next plan call reports it
             except (OSError, ValueError):
@@ -319,7 +302,7 @@ class SandboxedPlanner:
         self._kill()
         if self.cgroups is not None:
             for path in self.cgroups.paths:
-                for pid in _cgroup_pids(path):
+                for pid in cpu_usage.cgroup_pids(path):
                     with contextlib.suppress(ProcessLookupError):
                         os.kill(pid, signal.SIGKILL)
 
@@ -328,24 +311,11 @@ class SandboxedPlanner:
                   f"for {self.limits.plan_timeout_s:g} s)")
 
     def _write(self, data: bytes, deadline: float) -> None:
-        """Write all of `data` to the non-blocking pipe before `deadline`, else
-        `_StalledError`; `OSError` when the process is gone."""
-        fd = self._to
-        if fd is None:
+        """Write all of `data` to the planner process before `deadline` (hold the send lock),
+        else `StalledError`; `OSError` when the process is gone."""
+        if self._to is None:
             raise BrokenPipeError("not started, or closed")
-        view = memoryview(data)
-        poller = select.poll()
-        poller.register(fd, select.POLLOUT)
-        while view:
-            try:
-                view = view[os.write(fd, view):]
-                continue
-            except BlockingIOError:
-                pass
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise _StalledError
-            poller.poll(max(1, int(left * 1000)))
+        write_all(self._to, data, deadline)
 
     def _call(self, message: dict[str, Any] | Callable[[], dict[str, Any]],
               what: str) -> dict[str, Any]:
@@ -365,7 +335,7 @@ class SandboxedPlanner:
         try:
             data = encode_message(message() if callable(message) else message)
             self._write(data, deadline)
-        except _StalledError:
+        except StalledError:
             self._stalled()
             raise SandboxError(self._death_reason(what)) from None
         except (OSError, ValueError):
@@ -384,34 +354,26 @@ class SandboxedPlanner:
         """The next reply within `timeout` seconds (what is left of the call's `limit`, which
         is what was left of the run's planning budget when `by_budget`)."""
         limit = timeout if limit is None else limit
-        deadline = time.monotonic() + timeout
         if self._from is None:
             raise SandboxError(self._death_reason(what))
-        poller = select.poll()
-        poller.register(self._from, select.POLLIN)
-        while b"\n" not in self._buffer:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                self._kill()
-                if self._failure is not None:
-                    raise SandboxError(f"{self._failure} during {what}")
-                if by_budget:
-                    raise SandboxError(f"the planner used up its planning budget of "
-                                       f"{self.limits.run_planning_budget_s:g} s for the run")
-                raise SandboxError(f"the planner's {what} took longer than {limit:g} s")
-            if not poller.poll(max(1, int(left * 1000))):
-                continue
-            chunk = os.read(self._from, 1 << 20)
-            if not chunk:
-                raise SandboxError(self._death_reason(what))
-            self._buffer += chunk
-            if len(self._buffer) > isolation_limit():
-                self._kill()
-                raise SandboxError("the planner sent a message larger than "
-                                   f"{MAX_MESSAGE_BYTES} bytes")
-        line, _, self._buffer = self._buffer.partition(b"\n")
         try:
-            return parse_message(line + b"\n")
+            line, self._buffer = read_line(self._from, self._buffer, time.monotonic() + timeout)
+        except ReadTimeoutError:
+            self._kill()
+            if self._failure is not None:
+                raise SandboxError(f"{self._failure} during {what}") from None
+            if by_budget:
+                raise SandboxError(f"the planner used up its planning budget of "
+                                   f"{self.limits.run_planning_budget_s:g} s for the run") from None
+            raise SandboxError(f"the planner's {what} took longer than {limit:g} s") from None
+        except ClosedError:
+            raise SandboxError(self._death_reason(what)) from None
+        except TooLargeError:
+            self._kill()
+            raise SandboxError("the planner sent a message larger than "
+                               f"{MAX_MESSAGE_BYTES} bytes") from None
+        try:
+            return parse_message(line)
         except ProtocolError as exc:
             self._kill()
             raise SandboxError(f"the planner broke the protocol: {exc}") from None
@@ -434,97 +396,8 @@ class SandboxedPlanner:
         tail = self.stderr_tail().strip().splitlines()[-20:]
         if tail:
             log.warning("planner stderr (last lines):\n%s", "\n".join(tail))
-        try:
-            written = self.stderr_path.stat().st_size
-        except OSError:
-            written = 0
-        if written >= self.limits.file_size_mib * 1024 * 1024 - 1_000_000:
-            return (f"the planner process exceeded its file size limit (too much output, "
-                    f"{self.limits.file_size_mib} MiB) during {what}")
-        if self.cgroups is not None and self.cgroups.oom_killed():
-            return f"the planner exceeded its memory limit of {self.limits.memory_mib} MiB"
-        if "Resource temporarily unavailable" in self.stderr_tail() or (
-                "fork" in self.stderr_tail() and "BlockingIOError" in self.stderr_tail()):
-            return f"the planner exceeded its process limit of {self.limits.processes}"
-        if code is not None and code < 0:
-            sig = signal.Signals(-code)
-            reason = _SIGNALS.get(sig, f"was killed by {sig.name}")
-            if sig == signal.SIGKILL and self.iso.cgroup_memory is None:
-                reason = "was killed (memory or another limit)"
-            return f"the planner process {reason} during {what}"
-        return f"the planner process exited (code {code}) during {what}"
-
-
-_CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
-
-
-def _cpu_ticks(pid: int) -> int:
-    """utime + stime + cutime + cstime of process `pid` in clock ticks; 0 if it is gone."""
-    try:
-        with open(f"/proc/{pid}/stat", "rb") as fh:
-            stat = fh.read()
-    except OSError:
-        return 0
-    # The command name (field 2) may hold spaces and parentheses: count from its last ')'.
-    fields = stat[stat.rfind(b")") + 2:].split()
-    try:
-        return sum(int(value) for value in fields[11:15])  # fields 14 to 17
-    except ValueError:
-        return 0
-
-
-def _descendants(pid: int) -> set[int]:
-    """`pid` and the processes below it, from `/proc/PID/task/TID/children`."""
-    found: set[int] = set()
-    todo = [pid]
-    while todo:
-        current = todo.pop()
-        if current in found:
-            continue
-        found.add(current)
-        try:
-            tasks = os.listdir(f"/proc/{current}/task")
-        except OSError:
-            continue
-        for tid in tasks:
-            try:
-                with open(f"/proc/{current}/task/{tid}/children", "rb") as fh:
-                    todo.extend(int(child) for child in fh.read().split())
-            except (OSError, ValueError):
-                continue
-    return found
-
-
-def _cgroup_pids(path: Path) -> set[int]:
-    try:
-        return {int(pid) for pid in (path / "cgroup.procs").read_text().split()}
-    except (OSError, ValueError):
-        return set()
-
-
-# What the planner process reports of a call, ms: refreshing its map and the planner's `plan`.
-TIMING_KEYS = ("map", "plan")
-
-
-def clean_timing(timing: Any) -> dict[str, float]:
-    """The known keys of a reply's untrusted `timing_ms`, finite non-negative numbers only."""
-    if not isinstance(timing, dict):
-        return {}
-    clean = {}
-    for key in TIMING_KEYS:
-        value = timing.get(key)
-        if (isinstance(value, int | float) and not isinstance(value, bool)
-                and math.isfinite(value) and value >= 0):
-            clean[key] = float(value)
-    return clean
-
-
-def isolation_limit() -> int:
-    return MAX_MESSAGE_BYTES + 1
-
-
-def _box_message(box: IndexBox | None) -> list[list[int]] | None:
-    return None if box is None else [list(box.lo), list(box.hi)]
+        return exit_reason(code, what, stderr_path=self.stderr_path, limits=self.limits,
+                           cgroups=self.cgroups, memory_cgroup=self.iso.cgroup_memory is not None)
 
 
 def _shm_root() -> str | None:

@@ -1,0 +1,131 @@
+"""The pids and memory cgroups of planner processes: found writable (`cgroup_root`), made one per
+process with its limits (`make_cgroups`), and removed with whatever is left in them."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import threading
+import time
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from worker.sandbox.limits import SandboxLimits
+
+if TYPE_CHECKING:
+    from worker.sandbox.isolation import Isolation
+
+CGROUP_V1 = Path("/sys/fs/cgroup")
+
+
+def cgroup_root(controller: str) -> Path | None:
+    for candidate in (CGROUP_V1 / controller / "flybo-sandbox", CGROUP_V1 / "flybo-sandbox"):
+        try:
+            candidate.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            continue
+        limit_file = {"pids": "pids.max", "memory": "memory.limit_in_bytes"}[controller]
+        if candidate.parent == CGROUP_V1:  # cgroup v2: one hierarchy
+            limit_file = {"pids": "pids.max", "memory": "memory.max"}[controller]
+            for parent in (CGROUP_V1, candidate):  # the controller must reach our children
+                with contextlib.suppress(OSError):
+                    (parent / "cgroup.subtree_control").write_text(f"+{controller}")
+        probe = candidate / f"probe-{uuid.uuid4().hex[:8]}"
+        try:
+            probe.mkdir()
+            try:
+                # Writable, not merely there: a limit that cannot be set is no limit.
+                (probe / limit_file).write_text("64" if controller == "pids" else "268435456")
+                ok = True
+            finally:
+                probe.rmdir()
+        except OSError:
+            ok = False
+        if ok:
+            return candidate
+    return None
+
+
+@dataclass
+class Cgroups:
+    """The cgroups of one planner process, removed by `cleanup`."""
+
+    paths: list[Path]
+    memory: Path | None
+
+    def oom_killed(self) -> bool:
+        if self.memory is None:
+            return False
+        for name in ("memory.oom_control", "memory.events"):
+            path = self.memory / name
+            if path.exists():
+                for line in path.read_text().splitlines():
+                    key, _, value = line.partition(" ")
+                    if key == "oom_kill" and value.strip() not in ("", "0"):
+                        return True
+        failcnt = self.memory / "memory.failcnt"
+        return failcnt.exists() and failcnt.read_text().strip() not in ("", "0")
+
+    def cleanup(self, wait_s: float = 2.0) -> None:
+        """Kill what is left in the cgroups and remove them. A cgroup stays busy until its
+        killed processes are reaped; one still busy after `wait_s` is removed by a later
+        `make_cgroups` instead of being left behind."""
+        remaining = list(self.paths)
+        deadline = time.monotonic() + wait_s
+        while True:
+            remaining = [path for path in remaining if not _remove_cgroup(path)]
+            if not remaining or time.monotonic() >= deadline:
+                break
+            time.sleep(0.02)
+        with _stale_lock:
+            _stale_cgroups.extend(remaining)
+
+
+# Cgroups of this process that were still busy when their sandbox closed.
+_stale_cgroups: list[Path] = []
+_stale_lock = threading.Lock()
+
+
+def _remove_cgroup(path: Path) -> bool:
+    """Kill the processes in cgroup `path` and remove it; whether it is gone."""
+    try:
+        for pid in (path / "cgroup.procs").read_text().split():
+            with contextlib.suppress(ProcessLookupError, ValueError):
+                os.kill(int(pid), 9)
+        path.rmdir()
+    except FileNotFoundError:
+        return True
+    except OSError:
+        return False
+    return True
+
+
+def make_cgroups(iso: Isolation, limits: SandboxLimits) -> Cgroups:
+    with _stale_lock:
+        _stale_cgroups[:] = [path for path in _stale_cgroups if not _remove_cgroup(path)]
+    name = f"sbx-{uuid.uuid4().hex[:12]}"
+    paths: list[Path] = []
+    memory: Path | None = None
+    if iso.cgroup_pids is not None:
+        path = iso.cgroup_pids / name
+        path.mkdir()
+        (path / "pids.max").write_text(str(limits.processes))
+        paths.append(path)
+    if iso.cgroup_memory is not None:
+        path = iso.cgroup_memory / name
+        if not path.exists():
+            path.mkdir()
+        limit = str(limits.memory_mib * 1024 * 1024)
+        for fname in ("memory.limit_in_bytes", "memory.max"):
+            if (path / fname).exists():
+                (path / fname).write_text(limit)
+        swap = path / "memory.memsw.limit_in_bytes"
+        if swap.exists():
+            with contextlib.suppress(OSError):
+                swap.write_text(limit)
+        if path not in paths:
+            paths.append(path)
+        memory = path
+    return Cgroups(paths, memory)
