@@ -52,19 +52,23 @@ run: install
 demo-run: install
 	$(BIN)/flybo run --area maze --planner classic --seed 0 --out data/runs/maze-classic-$$(date +%Y%m%d-%H%M%S)
 
+# Tests run in TEST_JOBS processes (pytest-xdist; tests/conftest.py keeps what must run together in
+# one); TEST_JOBS=0 runs them in this process.
+TEST_JOBS ?= $(shell nproc)
+
 # Everything: lint, types and every test (the slow ones, the browser tests and the wheel's
 # install into a fresh environment included).
 test: install test-system-deps
 	$(BIN)/ruff check .
 	$(BIN)/mypy
-	$(BIN)/pytest
+	$(BIN)/pytest -n $(TEST_JOBS) --dist loadgroup
 
 # The inner loop, a few minutes: lint, types and the tests not marked `slow` (tests/conftest.py
 # marks the long ones of every folder). Needs no browser.
 test-fast: install
 	$(BIN)/ruff check .
 	$(BIN)/mypy
-	$(BIN)/pytest -m "not slow"
+	$(BIN)/pytest -n $(TEST_JOBS) --dist loadgroup -m "not slow"
 
 benchmark: install benchmark-system-deps
 	$(BIN)/python benchmarks/sim_speed.py

@@ -20,6 +20,8 @@ import anyio.to_thread
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from sqlalchemy import Engine
+from sqlalchemy.orm import Session, sessionmaker
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from server.catalog import sync_builtin_areas, sync_builtin_planners
@@ -50,6 +52,34 @@ def create_app(settings: Settings | None = None, *, sweeper: bool = True,
     engine = make_engine(settings.db_url)
     sessions = make_session_factory(engine)
     read_sessions = make_session_factory(read_only(engine))
+    lifespan = _lifespan(settings, engine, sessions, benchmark_version=benchmark_version,
+                         sweeper=sweeper, sync_areas=sync_areas)
+    app = FastAPI(title="FLYBO", version="1", lifespan=lifespan,
+                  description="Benchmark service for autonomous exploration planners.")
+    app.state.settings = settings
+    app.state.engine = engine
+    app.state.sessions = sessions
+    app.state.read_sessions = read_sessions
+    app.state.planner_check = planner_check
+    app.state.benchmark_version = benchmark_version if isinstance(benchmark_version, str) \
+        else None
+    app.include_router(health.router)
+    for router in (areas.router, planners.router, jobs.router, groups.router, runs.router,
+                   leaderboard.router, curves.router):
+        app.include_router(router, prefix=API_PREFIX)
+    install_middleware(app, settings)
+    _install_error_handlers(app)
+    return app
+
+
+Lifespan = Callable[[FastAPI], contextlib.AbstractAsyncContextManager[None]]
+
+
+def _lifespan(settings: Settings, engine: Engine, sessions: sessionmaker[Session], *,
+              benchmark_version: str | Callable[[], str] | None, sweeper: bool,
+              sync_areas: bool) -> Lifespan:
+    """Start-up (migrations, the built-in planners' rows, the current benchmark version, the
+    background area sync and sweeper) and shutdown of one app."""
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -77,8 +107,9 @@ def create_app(settings: Settings | None = None, *, sweeper: bool = True,
         # Areas are built in a background thread: the API answers meanwhile, a job naming an
         # area not synced yet builds its row on demand, and shutdown does not wait for it.
         if sync_areas:
-            threading.Thread(target=_sync_areas, name="area-sync", daemon=True).start()
-        sweeping = asyncio.create_task(_sweep_forever()) if sweeper else None
+            threading.Thread(target=_sync_areas, args=(sessions,), name="area-sync",
+                             daemon=True).start()
+        sweeping = asyncio.create_task(_sweep_forever(sessions, settings)) if sweeper else None
         try:
             yield
         finally:
@@ -88,36 +119,23 @@ def create_app(settings: Settings | None = None, *, sweeper: bool = True,
                     await sweeping
             engine.dispose()
 
-    def _sync_areas() -> None:
+    return lifespan
+
+
+def _sync_areas(sessions: sessionmaker[Session]) -> None:
+    try:
+        sync_builtin_areas(sessions)
+    except Exception:
+        log.exception("syncing the built-in areas failed")
+
+
+async def _sweep_forever(sessions: sessionmaker[Session], settings: Settings) -> None:
+    while True:
+        await asyncio.sleep(settings.sweep_interval_s)
         try:
-            sync_builtin_areas(sessions)
+            await asyncio.to_thread(sweep, sessions, settings)
         except Exception:
-            log.exception("syncing the built-in areas failed")
-
-    async def _sweep_forever() -> None:
-        while True:
-            await asyncio.sleep(settings.sweep_interval_s)
-            try:
-                await asyncio.to_thread(sweep, sessions, settings)
-            except Exception:
-                log.exception("sweep failed")
-
-    app = FastAPI(title="FLYBO", version="1", lifespan=lifespan,
-                  description="Benchmark service for autonomous exploration planners.")
-    app.state.settings = settings
-    app.state.engine = engine
-    app.state.sessions = sessions
-    app.state.read_sessions = read_sessions
-    app.state.planner_check = planner_check
-    app.state.benchmark_version = benchmark_version if isinstance(benchmark_version, str) \
-        else None
-    app.include_router(health.router)
-    for router in (areas.router, planners.router, jobs.router, groups.router, runs.router,
-                   leaderboard.router, curves.router):
-        app.include_router(router, prefix=API_PREFIX)
-    install_middleware(app, settings)
-    _install_error_handlers(app)
-    return app
+            log.exception("sweep failed")
 
 
 def _install_error_handlers(app: FastAPI) -> None:

@@ -62,7 +62,23 @@ def _is_slow(item: pytest.Item) -> bool:
     return callspec is not None and callspec.params.get("database_url") == "postgresql"
 
 
+# `make test` spreads the tests over the cores (`pytest -n N --dist loadgroup`); a group runs in
+# one process, in order. The Redis tests share one group because the fault tests stop and restart
+# the Redis server itself; every other file is a group of its own, so that its module fixtures
+# (a service with finished jobs, say) start once.
+SHARED_REDIS = ("tests/faults/", "tests/server/test_end_to_end.py")
+
+
+def xdist_group(item: pytest.Item) -> str:
+    node = item.nodeid
+    if any(node.startswith(entry) for entry in SHARED_REDIS):
+        return "redis"
+    return node.split("::", 1)[0]
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
         if _is_slow(item):
             item.add_marker(pytest.mark.slow)
+        if config.pluginmanager.hasplugin("xdist"):
+            item.add_marker(pytest.mark.xdist_group(xdist_group(item)))
