@@ -9,7 +9,8 @@ from celery.signals import worker_process_init
 from server.queue import RUN_TASK
 from server.settings import load_settings
 from worker.celery_app import app
-from worker.runner import execute_run, measure_speed_in_background
+from worker.runner import execute_run
+from worker.speed import measure_speed_in_background
 
 
 @app.task(name=RUN_TASK, acks_late=True, reject_on_worker_lost=True, ignore_result=True)

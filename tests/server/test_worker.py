@@ -163,7 +163,7 @@ def test_the_soft_time_limit_in_a_plan_call_is_the_platforms(
 
 def test_the_speed_factor_is_measured_once_per_process(monkeypatch: pytest.MonkeyPatch) -> None:
     import sim.reference_speed
-    from worker import runner
+    from worker import speed
 
     calls: list[int] = []
 
@@ -172,7 +172,7 @@ def test_the_speed_factor_is_measured_once_per_process(monkeypatch: pytest.Monke
         time.sleep(0.2)
         return 0.75
 
-    monkeypatch.setattr(runner, "_speed", [])
+    monkeypatch.setattr(speed, "_speed", [])
     monkeypatch.setattr(sim.reference_speed, "speed_factor", measure)
     thread = measure_speed_in_background()
     assert machine_speed_factor() == 0.75  # waits for the measurement under way
