@@ -89,6 +89,7 @@ def _measure(args: argparse.Namespace, workers: int, limited: bool) -> dict[str,
         command = [sys.executable, __file__, "--child", str(folder), "--planner", args.planner,
                    "--seconds", str(args.seconds)]
         env = _environment(workers, limited)
+        load = os.getloadavg()[0]  # other work on the machine: the measurement's noise
         procs = [subprocess.Popen(command, env=env) for _ in range(workers)]
         while len(list(folder.glob("ready-*"))) < workers:
             if any(p.poll() not in (None, 0) for p in procs):
@@ -101,7 +102,7 @@ def _measure(args: argparse.Namespace, workers: int, limited: bool) -> dict[str,
             if proc.wait() != 0:
                 raise SystemExit(f"a worker process failed ({proc.returncode})")
         episodes = [e for p in folder.glob("done-*.json") for e in json.loads(p.read_text())]
-    return {"workers": workers, "limited": limited, "threads": threads,
+    return {"workers": workers, "limited": limited, "threads": threads, "load_1min": load,
             "wall_s": max(e["end"] for e in episodes) - start,
             "episode_wall_s": sum(e["wall_s"] for e in episodes),
             "cpu_s": sum(e["cpu_s"] for e in episodes), "episodes": episodes}
@@ -135,12 +136,14 @@ def main() -> None:
             measured[workers, limited].append(m)
             rows.append([round_, _label(workers, limited), f"{m['wall_s']:.1f}",
                          f"{m['cpu_s']:.1f}", f"{m['cpu_s'] / m['wall_s']:.2f}",
-                         f"{args.episodes * args.seconds / m['wall_s']:.1f}"])
+                         f"{args.episodes * args.seconds / m['wall_s']:.1f}",
+                         f"{m['load_1min']:.1f}"])
             print(f"round {round_} {_label(workers, limited)}: {m['wall_s']:.1f} s  "
                   f"({'; '.join(m['threads'])})", flush=True)
     print_table(f"{args.episodes} x {args.seconds:g} s of {args.planner} on "
                 f"{', '.join(args.areas)}, {usable_cores()} usable cores",
-                ["round", "set-up", "wall s", "CPU s", "cores busy", "sim s / wall s"], rows)
+                ["round", "set-up", "wall s", "CPU s", "cores busy", "sim s / wall s",
+                 "load before"], rows)
     wall = {s: statistics.mean(m["wall_s"] for m in ms) for s, ms in measured.items()}
     ratios = {
         "2 vs 1 worker, limited (flybo serve now)": wall[1, True] / wall[2, True],
