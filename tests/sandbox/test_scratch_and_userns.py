@@ -1,17 +1,19 @@
-"""The planner's writable folders are memory of limited size, not the host's disk, and it cannot
-create user namespaces of its own."""
+"""The planner's writable folders are memory of limited size, not the host's disk; it cannot
+create user namespaces of its own; the seccomp filter refuses the system calls it lists."""
 
 from __future__ import annotations
 
 import ast
 import os
 import stat
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from sim.episode import run_episode
 from tests.sandbox.test_hostile import CONFIG, _planner
+from worker.sandbox import isolation
 from worker.sandbox.dry_run import tiny_area
 from worker.sandbox.isolation import MIN_BWRAP, SandboxLimits, _probe_bwrap, probe
 from worker.sandbox.proxy import SandboxedPlanner, SandboxError
@@ -55,7 +57,7 @@ def _fly_holding(tmp_path: Path, source: str, limits: SandboxLimits) -> tuple[st
     """Fly `source`; the reason it failed, and the files of 1 MiB or more that the sandbox's
     folder on the host held before it was closed."""
     code = tmp_path / "code"
-    code.mkdir()
+    code.mkdir(parents=True)
     (code / "planner.py").write_text(source)
     area, truth = tiny_area()
     with SandboxedPlanner(code=code, limits=limits) as planner:
@@ -92,9 +94,41 @@ raise RuntimeError(f'unshare gave {result} ({error})')
 """
 
 
-def test_a_planner_cannot_create_a_user_namespace(tmp_path: Path, isolated: None) -> None:
-    reason, _ = _fly_holding(tmp_path, _planner(NESTS), SandboxLimits())
+def test_a_planner_cannot_create_a_user_namespace(tmp_path: Path, isolated: None,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    reason, _ = _fly_holding(tmp_path / "filtered", _planner(NESTS), SandboxLimits())
     assert "unshare gave -1" in reason, reason
+    # Without the seccomp filter too: the user namespace allows no nested one
+    # (`--disable-userns`), which the kernel reports as ENOSPC.
+    iso = replace(probe(), seccomp=False)
+    monkeypatch.setattr(isolation, "probe", lambda: iso)
+    reason, _ = _fly_holding(tmp_path / "unfiltered", _planner(NESTS), SandboxLimits())
+    assert "unshare gave -1 (No space left on device)" in reason, reason
+
+
+# Calls that succeed for any process without the filter: unshare of nothing, and asking to be
+# traced by its parent.
+FILTERED = """
+libc = ctypes.CDLL(None, use_errno=True)
+found = {}
+for name, call in (('unshare', lambda: libc.unshare(0)),
+                   ('ptrace', lambda: libc.ptrace(0, 0, None, None))):
+    result = call()
+    found[name] = (result, os.strerror(ctypes.get_errno()) if result != 0 else None)
+raise RuntimeError(repr(found))
+"""
+
+
+def test_the_seccomp_filter_refuses_its_calls(tmp_path: Path, isolated: None) -> None:
+    if not probe().seccomp:
+        message = f"no seccomp filter here: {'; '.join(probe().notes)}"
+        if os.environ.get("CI") == "true":
+            pytest.fail(message)
+        pytest.skip(message)
+    reason, _ = _fly_holding(tmp_path, _planner(FILTERED), SandboxLimits())
+    found = ast.literal_eval(reason[reason.index("{"):reason.rindex("}") + 1])
+    assert found == {"unshare": (-1, "Operation not permitted"),
+                     "ptrace": (-1, "Operation not permitted")}, found
 
 
 def test_an_old_bubblewrap_is_not_full_isolation(tmp_path: Path) -> None:

@@ -45,14 +45,20 @@ PROBE_ARGS = (*NAMESPACE_ARGS, "--ro-bind", "/", "/", "--proc", "/proc",
               "--", "true")
 
 
+def seccomp_args(fd: int | None) -> list[str]:
+    """Bubblewrap's options loading the seccomp filter in `fd` (`seccomp_filter.filter_fd`)."""
+    return [] if fd is None else ["--seccomp", str(fd)]
+
+
 def command(iso: Isolation, limits: SandboxLimits, *, numba_seed: Path, code: Path | None,
-            map_dir: Path, child_args: list[str]) -> list[str]:
-    """The command line that starts the planner process."""
+            map_dir: Path, child_args: list[str], seccomp_fd: int | None = None) -> list[str]:
+    """The command line that starts the planner process; `seccomp_fd` holds the seccomp
+    filter, to be passed to the process."""
     python = [sys.executable, "-s", "-B", "-m", "worker.sandbox.child", *child_args]
     if not (iso.bwrap and iso.namespaces):
         return python
-    args = [iso.bwrap, *NAMESPACE_ARGS, "--ro-bind", "/usr", "/usr", "--proc", "/proc",
-            *device_args(limits), *scratch_args(limits, "/tmp")]
+    args = [iso.bwrap, *NAMESPACE_ARGS, *seccomp_args(seccomp_fd), "--ro-bind", "/usr", "/usr",
+            "--proc", "/proc", *device_args(limits), *scratch_args(limits, "/tmp")]
     for link in ("bin", "lib", "lib64", "sbin"):
         target = Path("/") / link
         if target.is_symlink():

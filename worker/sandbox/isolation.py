@@ -10,7 +10,8 @@
   a source tree, an editable install or an installed wheel alike.
 - **Namespaces**: no network (a new, empty network namespace), own user, PID, IPC and UTS
   namespaces and no further user namespaces (bubblewrap 0.8's `--disable-userns`), an empty
-  environment, a new session; the process dies with the worker.
+  environment, a new session; the process dies with the worker. A seccomp filter
+  (`seccomp_filter`) where libseccomp is installed.
 - **Limits**: processes (cgroup `pids.max`), memory (cgroup memory limit), CPU seconds, open
   files, file size and core dumps (rlimits).
 Uploaded code runs only where `probe()` finds all of it (`Isolation.full`): `require_full()`
@@ -22,12 +23,14 @@ that setting is refused (`SandboxPolicyError`). A failed probe is not cached: th
 probes again.
 
 This module probes and decides; the parts are `bwrap_command` (the command line), `packages`
-(what the planner process sees), `cgroups` and `limits` (rlimits), re-exported here.
+(what the planner process sees), `cgroups`, `limits` (rlimits) and `seccomp_filter`, the first
+four re-exported here.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import shutil
 import subprocess
 from dataclasses import dataclass, field
@@ -35,6 +38,7 @@ from pathlib import Path
 
 from server import planner_package
 from server.planner_package import SandboxPolicy, insecure_sandbox_refusal
+from worker.sandbox import seccomp_filter
 
 # Re-exported: the sandbox's parts, as the rest of the project has always imported them.
 from worker.sandbox.bwrap_command import (
@@ -44,6 +48,7 @@ from worker.sandbox.bwrap_command import (
     child_paths,
     command,
     scratch_args,
+    seccomp_args,
 )
 from worker.sandbox.cgroups import Cgroups, cgroup_root, make_cgroups
 from worker.sandbox.limits import SandboxLimits, preexec
@@ -82,6 +87,8 @@ class Isolation:
     cgroup_pids: Path | None
     cgroup_memory: Path | None
     notes: list[str] = field(default_factory=list)
+    # The seccomp filter (`seccomp_filter`) is loaded: a further layer, not needed for `full`.
+    seccomp: bool = False
 
     @property
     def full(self) -> bool:
@@ -110,10 +117,16 @@ def _probe() -> Isolation:
     notes = []
     bwrap = shutil.which("bwrap")
     namespaces = False
+    try:
+        seccomp_filter.filter_program()
+        seccomp = True
+    except (seccomp_filter.SeccompUnavailableError, OSError) as exc:
+        seccomp = False
+        notes.append(f"no seccomp filter: {exc}")
     if bwrap is None:
         notes.append("bubblewrap (bwrap) is not installed: no namespaces")
     else:
-        namespaces, note = _probe_bwrap(bwrap)
+        namespaces, note = _probe_bwrap(bwrap, seccomp=seccomp)
         if note:
             notes.append(note)
     pids, memory = cgroup_root("pids"), cgroup_root("memory")
@@ -122,7 +135,7 @@ def _probe() -> Isolation:
                      "only, which does not bind root")
     if memory is None:
         notes.append("no writable memory cgroup: memory is limited by RLIMIT_AS")
-    return Isolation(bwrap, namespaces, pids, memory, notes)
+    return Isolation(bwrap, namespaces, pids, memory, notes, seccomp=namespaces and seccomp)
 
 
 def bwrap_version(bwrap: str) -> tuple[int, ...] | None:
@@ -139,19 +152,24 @@ def bwrap_version(bwrap: str) -> tuple[int, ...] | None:
         return None
 
 
-def _probe_bwrap(bwrap: str) -> tuple[bool, str | None]:
-    """Whether bubblewrap starts a process with the planner's options; else why not."""
+def _probe_bwrap(bwrap: str, *, seccomp: bool = False) -> tuple[bool, str | None]:
+    """Whether bubblewrap starts a process with the planner's options (and the seccomp filter,
+    when `seccomp`); else why not."""
     version = bwrap_version(bwrap)
     if version is None or version < MIN_BWRAP:
         shown = ".".join(map(str, version)) if version else "of unknown version"
         return False, (f"bubblewrap {shown} is older than "
                        f"{'.'.join(map(str, MIN_BWRAP))}: it cannot keep the planner from "
                        "creating user namespaces (--disable-userns)")
+    fds = (seccomp_filter.filter_fd(),) if seccomp else ()
     try:
-        result = subprocess.run([bwrap, *PROBE_ARGS], capture_output=True, text=True,
-                                timeout=30)
+        result = subprocess.run([bwrap, *seccomp_args(fds[0] if fds else None), *PROBE_ARGS],
+                                capture_output=True, text=True, timeout=30, pass_fds=fds)
     except (OSError, subprocess.SubprocessError) as exc:
         return False, f"bubblewrap cannot create namespaces here: {exc}"
+    finally:
+        for fd in fds:
+            os.close(fd)
     if result.returncode != 0:
         return False, f"bubblewrap cannot create namespaces here: {result.stderr.strip()}"
     return True, None

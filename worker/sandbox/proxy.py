@@ -26,7 +26,7 @@ import numpy as np
 from sim.interface import Observation, Plan, PlannerContext
 from sim.map_view import MapView
 from sim.occupancy import DirtyBoxSubscription, IndexBox
-from worker.sandbox import cpu_usage, isolation
+from worker.sandbox import cpu_usage, isolation, seccomp_filter
 from worker.sandbox.exit_reasons import exit_reason, stderr_tail
 from worker.sandbox.isolation import SandboxLimits
 from worker.sandbox.pipe import (
@@ -172,10 +172,13 @@ class SandboxedPlanner:
         to_child_r, to_child_w = os.pipe()
         from_child_r, from_child_w = os.pipe()
         source = ["--code", child_code] if child_code else ["--builtin", str(self.builtin)]
+        seccomp_fd = seccomp_filter.filter_fd() if self.iso.seccomp else None
         args = isolation.command(
             self.iso, self.limits, numba_seed=numba_seed, code=self.code, map_dir=self.shm_dir,
             child_args=["--fd-in", str(to_child_r), "--fd-out", str(from_child_w),
-                        "--map", child_map, "--numba-seed", child_seed, *source])
+                        "--map", child_map, "--numba-seed", child_seed, *source],
+            seccomp_fd=seccomp_fd)
+        passed = (to_child_r, from_child_w) + ((seccomp_fd,) if seccomp_fd is not None else ())
         self.cgroups = isolation.make_cgroups(self.iso, self.limits)
         # Without bubblewrap (built-in planners, the insecure fallback) the working folder is
         # `self.work` on the host; with it, this environment is replaced by `--clearenv`.
@@ -186,10 +189,10 @@ class SandboxedPlanner:
         with self.stderr_path.open("wb") as err:
             self.proc = subprocess.Popen(
                 args, stdin=subprocess.DEVNULL, stdout=err, stderr=err, env=env,
-                cwd=self.work, pass_fds=(to_child_r, from_child_w), start_new_session=True,
+                cwd=self.work, pass_fds=passed, start_new_session=True,
                 preexec_fn=isolation.preexec(self.limits, self.cgroups, self.iso))
-        os.close(to_child_r)
-        os.close(from_child_w)
+        for fd in passed:
+            os.close(fd)
         if self._failure is not None:
             self._kill()
         os.set_blocking(to_child_w, False)  # a planner that stops reading cannot block us
