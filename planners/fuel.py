@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 from typing import ClassVar
 
+import numba
 import numpy as np
 import numpy.typing as npt
 from pydantic import Field
@@ -87,33 +88,45 @@ class FuelConfig(PlannerConfig):
     escape_reach_voxels: int = Field(10, ge=1)
 
 
-def wrap_angle(a: float) -> float:
-    return math.atan2(math.sin(a), math.cos(a))
-
-
-def pose_cost(length_m: float, p1: FloatArray, p2: FloatArray, yaw1: float, yaw2: float,
-              velocity: FloatArray, v_max: float, yaw_rate: float, w_dir: float) -> float:
-    """FUEL's time cost of going from (p1, yaw1) to (p2, yaw2) along a path of `length_m`:
-    max(length / v_max + w_dir x angle(velocity, p2 - p1), |yaw change| / yaw_rate); the
-    direction term only while moving (speed above 1 mm/s)."""
-    pos_cost = length_m / v_max
+def pose_cost(length_m: npt.ArrayLike, p1: npt.ArrayLike, p2: npt.ArrayLike,
+              yaw1: npt.ArrayLike, yaw2: npt.ArrayLike, velocity: FloatArray, v_max: float,
+              yaw_rate: float, w_dir: float) -> FloatArray:
+    """FUEL's time cost of going from (p1, yaw1) to (p2, yaw2) along paths of `length_m`:
+    max(length / v_max + w_dir x angle(velocity, p2 - p1), |yaw change| / yaw_rate), the
+    direction term only while moving (speed above 1 mm/s). Arguments broadcast (positions on a
+    last axis of 3); returns their broadcast shape."""
+    pos_cost = np.asarray(length_m, dtype=np.float64) / v_max
     speed = float(np.linalg.norm(velocity))
-    step = p2 - p1
-    dist = float(np.linalg.norm(step))
-    if speed > 1e-3 and dist > 1e-9:
-        cos = float(np.dot(velocity / speed, step / dist))
-        pos_cost += w_dir * math.acos(max(-1.0, min(1.0, cos)))
-    yaw_cost = abs(wrap_angle(yaw2 - yaw1)) / yaw_rate
-    return max(pos_cost, yaw_cost)
+    if speed > 1e-3:
+        step = np.asarray(p2, dtype=np.float64) - np.asarray(p1, dtype=np.float64)
+        dist = np.linalg.norm(step, axis=-1)
+        cos = np.sum(step * (velocity / speed), axis=-1) / np.maximum(dist, 1e-12)
+        angle = np.where(dist > 1e-9, np.arccos(np.clip(cos, -1.0, 1.0)), 0.0)
+        pos_cost = pos_cost + w_dir * angle
+    turn = np.asarray(yaw2, dtype=np.float64) - np.asarray(yaw1, dtype=np.float64)
+    yaw_cost = np.abs(np.arctan2(np.sin(turn), np.cos(turn))) / yaw_rate
+    out: FloatArray = np.maximum(pos_cost, yaw_cost)
+    return out
+
+
+@numba.njit(cache=True)
+def _pairs_clear(mask: BoolGrid, a: FloatArray, b: FloatArray) -> npt.NDArray[np.bool_]:
+    out = np.zeros((a.shape[0], b.shape[0]), dtype=np.bool_)
+    for i in range(a.shape[0]):
+        for j in range(b.shape[0]):
+            out[i, j] = segment_clear(mask, a[i], b[j])
+    return out
 
 
 class PathLengths:
     """Path lengths between world points for the tour costs: the straight line when it stays in
-    traversable voxels, else the shortest 26-connected path on a coarse grid whose cells are
-    passable when any of their voxels is traversable (an estimate, as FUEL's coarse A*), inf
-    when not connected. Distance fields are kept per source cell for the call."""
+    traversable voxels, else the length of a shortest 26-connected path on a coarse grid whose
+    cells are passable where any of their voxels is traversable (an estimate, as FUEL's coarse
+    A*), at least the straight line; inf when not connected. Coarse paths come from `paths`, a
+    cache kept from call to call: the path between two viewpoints that did not move is reused
+    while it stays passable, as FUEL keeps the costs between unchanged clusters."""
 
-    def __init__(self, view: MapView, cell_m: float) -> None:
+    def __init__(self, view: MapView, cell_m: float, paths: PathCache) -> None:
         self.view = view
         self.factor = max(1, round(cell_m / view.voxel_size))
         f = self.factor
@@ -123,33 +136,41 @@ class PathLengths:
         nx, ny, nz = (n // f for n in padded.shape)
         self.coarse: BoolGrid = np.ascontiguousarray(
             padded.reshape(nx, f, ny, f, nz, f).any(axis=(1, 3, 5)))
-        self._fields: dict[tuple[int, int, int], DistanceField] = {}
+        self.cell_m = view.voxel_size * f
+        self.paths = paths
 
-    def _cell(self, point: FloatArray) -> tuple[int, int, int]:
-        idx = self.view.world_to_index(point[None])[0] // self.factor
-        shape = self.coarse.shape
-        return (int(np.clip(idx[0], 0, shape[0] - 1)), int(np.clip(idx[1], 0, shape[1] - 1)),
-                int(np.clip(idx[2], 0, shape[2] - 1)))
+    def cells(self, points: FloatArray) -> IndexArray:
+        """(N, 3) coarse cells of (N, 3) world points, clipped to the grid."""
+        idx = self.view.world_to_index(points) // self.factor
+        out: IndexArray = np.clip(idx, 0, np.array(self.coarse.shape) - 1).astype(np.int64)
+        return out
 
-    def field(self, point: FloatArray) -> DistanceField:
-        key = self._cell(point)
-        if key not in self._fields:
-            self._fields[key] = DistanceField(self.coarse, np.array(key), self.view.voxel_size
-                                              * self.factor)
-        return self._fields[key]
+    def reachable(self, start: FloatArray, points: FloatArray) -> npt.NDArray[np.bool_]:
+        """(N,) whether the coarse grid joins `start` (3,) to each point."""
+        field = DistanceField(self.coarse, self.cells(start[None])[0], self.cell_m)
+        c = self.cells(points)
+        out: npt.NDArray[np.bool_] = np.isfinite(field.dist_m[c[:, 0], c[:, 1], c[:, 2]])
+        return out
 
-    def straight(self, a: FloatArray, b: FloatArray) -> bool:
+    def matrix(self, a: FloatArray, b: FloatArray) -> FloatArray:
+        """(N, M) path lengths from each of (N, 3) points to each of (M, 3)."""
         view = self.view
-        return bool(segment_clear(view.traversable, (a - view.origin) / view.voxel_size,
-                                  (b - view.origin) / view.voxel_size))
+        straight = _pairs_clear(view.traversable,
+                                np.ascontiguousarray((a - view.origin) / view.voxel_size),
+                                np.ascontiguousarray((b - view.origin) / view.voxel_size))
+        out: FloatArray = np.linalg.norm(a[:, None, :] - b[None, :, :], axis=2)
+        ca, cb = self.cells(a), self.cells(b)
+        for i, j in zip(*np.nonzero(~straight), strict=True):
+            out[i, j] = max(out[i, j], self._coarse(ca[i], cb[j]))
+        return out
 
-    def length(self, a: FloatArray, b: FloatArray) -> float:
-        if self.straight(a, b):
-            return float(np.linalg.norm(b - a))
-        ka, kb = self._cell(a), self._cell(b)
-        if kb in self._fields and ka not in self._fields:
-            return self._fields[kb].distance_to(ka)
-        return self.field(a).distance_to(kb)
+    def _coarse(self, a: IndexArray, b: IndexArray) -> float:
+        if np.array_equal(a, b):
+            return 0.0
+        # One cache entry per unordered pair: the grid's paths are symmetric.
+        lo, hi = (a, b) if tuple(a) < tuple(b) else (b, a)
+        path, length = self.paths.path(self.coarse, lo, hi, self.cell_m)
+        return float(length) if len(path) else float("inf")
 
 
 class FuelPlanner(Planner):
@@ -164,9 +185,11 @@ class FuelPlanner(Planner):
         self._offsets = sample_offsets(cfg.candidate_rmin_m, cfg.candidate_rmax_m,
                                        cfg.candidate_rnum, math.radians(cfg.candidate_dphi_deg))
         self._paths = PathCache()
+        self._coarse_paths = PathCache(max_entries=8192)
         self._give_up = GiveUpTracker(cfg.give_up_after, cfg.give_up_radius_voxels,
                                       camera=ctx.camera, view_reach_m=cfg.visited_view_reach_m)
         self._views: dict[bytes, Viewpoints] = {}
+        self._groups: dict[bytes, list[Cluster]] = {}
         self._goal: IndexArray | None = None
         self._target: IndexArray | None = None
         self._planned_at = 0.0
@@ -192,12 +215,14 @@ class FuelPlanner(Planner):
             return Plan.finished("the vehicle is not in traversable space")
         start_voxel = starts[0]
         pos = np.asarray(obs.pose.position, dtype=np.float64)
-        lengths = PathLengths(view, cfg.path_cell_m)
-        reach = lengths.field(view.index_to_world(start_voxel[None])[0])
+        lengths = PathLengths(view, cfg.path_cell_m, self._coarse_paths)
+        start_m = view.index_to_world(start_voxel[None])[0]
+        everywhere = lengths.reachable(start_m, np.vstack([v.positions for _, v in found]))
         active: list[tuple[Cluster, Viewpoints]] = []
+        offset = 0
         for cluster, views in found:
-            ok = np.array([np.isfinite(reach.distance_to(lengths._cell(p)))
-                           for p in views.positions], dtype=np.bool_)
+            ok = everywhere[offset:offset + len(views)]
+            offset += len(views)
             if ok.any():
                 active.append((cluster, views.take(ok)))
         self._planned = [c.voxels for c, _ in found]
@@ -238,7 +263,7 @@ class FuelPlanner(Planner):
         min_z = (None if cfg.min_frontier_height_m is None
                  else float(ctx.bounds_min[2]) + cfg.min_frontier_height_m)
         found = clusters(view, cfg.cluster_min, cfg.cluster_size_xy_m, cfg.down_sample,
-                         excluded=given_up, min_z_m=min_z)
+                         excluded=given_up, min_z_m=min_z, cache=self._groups)
         opaque = view.state != VoxelState.FREE
         kept: dict[bytes, Viewpoints] = {}
         out: list[tuple[Cluster, Viewpoints]] = []
@@ -257,14 +282,14 @@ class FuelPlanner(Planner):
         self._views = kept
         return out
 
-    def _cost(self, lengths: PathLengths, p1: FloatArray, p2: FloatArray, y1: float, y2: float,
-              velocity: FloatArray) -> float:
+    def _costs(self, lengths: PathLengths, a: FloatArray, b: FloatArray, ya: FloatArray,
+               yb: FloatArray, velocity: FloatArray) -> FloatArray:
+        """(N, M) FUEL's costs from the poses (a (N, 3), ya (N,)) to (b (M, 3), yb (M,))."""
         cfg = self.config
-        length = lengths.length(p1, p2)
-        if not np.isfinite(length):
-            length = cfg.unreachable_m
-        return pose_cost(length, p1, p2, y1, y2, velocity, self._v_max,
-                         math.radians(cfg.yaw_rate_deg_s), cfg.w_dir)
+        length = lengths.matrix(a, b)
+        length[~np.isfinite(length)] = cfg.unreachable_m
+        return pose_cost(length, a[:, None, :], b[None, :, :], ya[:, None], yb[None, :],
+                         velocity, self._v_max, math.radians(cfg.yaw_rate_deg_s), cfg.w_dir)
 
     def _top(self, pos: FloatArray, views: Viewpoints) -> int:
         """FUEL's cluster representative: the best-covering viewpoint at least
@@ -279,17 +304,15 @@ class FuelPlanner(Planner):
             return [0]
         pos = np.asarray(obs.pose.position, dtype=np.float64)
         vel = np.asarray(obs.velocity, dtype=np.float64)
-        tops = [(v.positions[self._top(pos, v)], float(v.yaws[self._top(pos, v)]))
-                for _, v in active]
-        n = len(tops) + 1
+        top = [self._top(pos, v) for _, v in active]
+        points = np.array([v.positions[t] for (_, v), t in zip(active, top, strict=True)])
+        yaws = np.array([v.yaws[t] for (_, v), t in zip(active, top, strict=True)])
+        n = len(active) + 1
         cost = np.zeros((n, n))
-        zero = np.zeros(3)
-        for j, (pj, yj) in enumerate(tops, start=1):
-            cost[0, j] = self._cost(lengths, pos, pj, obs.pose.yaw, yj, vel)
-            for i, (pi, yi) in enumerate(tops, start=1):
-                if i < j:
-                    cost[i, j] = self._cost(lengths, pi, pj, yi, yj, zero)
-                    cost[j, i] = self._cost(lengths, pj, pi, yj, yi, zero)
+        cost[0, 1:] = self._costs(lengths, pos[None], points, np.array([obs.pose.yaw]), yaws,
+                                  vel)[0]
+        cost[1:, 1:] = self._costs(lengths, points, points, yaws, yaws, np.zeros(3))
+        np.fill_diagonal(cost, 0.0)
         tour = solve_atsp(cost, exact_max_nodes=self.config.exact_max_nodes)
         return [int(t) - 1 for t in tour[1:]]
 
@@ -321,23 +344,21 @@ class FuelPlanner(Planner):
             layers[-1] = layers[-1][:1]
         # Dynamic programming over the layers: best[k] is the least cost of reaching the k-th
         # node of the current layer from the vehicle, first[k] the first-layer node it came by.
-        first_layer = layers[0]
-        best = np.array([self._cost(lengths, pos, p, obs.pose.yaw, y, vel) for p, y in first_layer])
-        first = np.arange(len(first_layer))
-        prev = first_layer
-        zero = np.zeros(3)
-        for layer in layers[1:]:
-            step = np.array([[self._cost(lengths, pa, pb, ya, yb, zero) for pb, yb in layer]
-                             for pa, ya in prev])
+        here_yaw = np.array([obs.pose.yaw])
+        points = [np.array([p for p, _ in layer]) for layer in layers]
+        yaws = [np.array([y for _, y in layer]) for layer in layers]
+        direct = self._costs(lengths, pos[None], points[0], here_yaw, yaws[0], vel)[0]
+        best, first = direct, np.arange(len(points[0]))
+        for k in range(1, len(layers)):
+            step = self._costs(lengths, points[k - 1], points[k], yaws[k - 1], yaws[k],
+                               np.zeros(3))
             total = best[:, None] + step
             arg = np.argmin(total, axis=0)
-            best = total[arg, np.arange(len(layer))]
+            best = total[arg, np.arange(len(points[k]))]
             first = first[arg]
-            prev = layer
         chosen = int(first[int(np.argmin(best))])
+        first_layer = layers[0]
         c0 = ids[0]
-        direct = np.array([self._cost(lengths, pos, p, obs.pose.yaw, y, vel)
-                           for p, y in first_layer])
         out = [(first_layer[chosen][0], first_layer[chosen][1], c0)]
         out += [(first_layer[k][0], first_layer[k][1], c0)
                 for k in np.argsort(direct, kind="stable") if k != chosen]

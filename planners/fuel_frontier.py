@@ -77,7 +77,11 @@ def downsample(points: FloatArray, leaf_m: float) -> FloatArray:
     if len(points) == 0:
         return np.zeros((0, 3))
     key = np.floor(points / leaf_m).astype(np.int64)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    key -= key.min(axis=0)
+    span = key.max(axis=0) + 1
+    # One integer per cube, in lexicographic order of the cubes (faster than rows in unique).
+    code = (key[:, 0] * span[1] + key[:, 1]) * span[2] + key[:, 2]
+    _, inverse, counts = np.unique(code, return_inverse=True, return_counts=True)
     inverse = inverse.ravel()
     sums = np.stack([np.bincount(inverse, points[:, a], len(counts)) for a in range(3)], axis=1)
     out: FloatArray = sums / counts[:, None]
@@ -111,7 +115,8 @@ def split_horizontally(voxels: IndexArray, points: FloatArray, leaf_m: float,
 
 
 def clusters(view: MapView, cluster_min: int, size_xy_m: float, down_sample: int,
-             excluded: BoolGrid | None = None, min_z_m: float | None = None) -> list[Cluster]:
+             excluded: BoolGrid | None = None, min_z_m: float | None = None,
+             cache: dict[bytes, list[Cluster]] | None = None) -> list[Cluster]:
     """The frontier clusters of the current map (see the module's docstring).
 
     Args:
@@ -120,6 +125,8 @@ def clusters(view: MapView, cluster_min: int, size_xy_m: float, down_sample: int
         down_sample: the down-sampling cube's side, in voxels.
         excluded: frontier voxels left out (given up).
         min_z_m: frontier voxels with centres below this height are left out.
+        cache: the pieces of each connected group by its voxels, from the previous call; a
+            group that did not change is not split again. Left holding this call's groups.
     """
     mask = view.frontier if excluded is None else view.frontier & ~excluded
     if min_z_m is not None:
@@ -138,13 +145,23 @@ def clusters(view: MapView, cluster_min: int, size_xy_m: float, down_sample: int
     groups = np.split(voxels, np.cumsum(sizes)[:-1])
     leaf = view.voxel_size * down_sample
     out: list[Cluster] = []
+    kept: dict[bytes, list[Cluster]] = {}
     for group, size in zip(groups, sizes, strict=True):
         if size <= cluster_min:
             continue
         group = group.astype(np.int64)
-        for piece in split_horizontally(group, view.index_to_world(group), leaf, size_xy_m):
-            points = view.index_to_world(piece)
-            out.append(Cluster(piece, points.mean(axis=0), downsample(points, leaf)))
+        key = group.tobytes()
+        pieces = cache.get(key) if cache is not None else None
+        if pieces is None:
+            pieces = []
+            for piece in split_horizontally(group, view.index_to_world(group), leaf, size_xy_m):
+                points = view.index_to_world(piece)
+                pieces.append(Cluster(piece, points.mean(axis=0), downsample(points, leaf)))
+        kept[key] = pieces
+        out.extend(pieces)
+    if cache is not None:
+        cache.clear()
+        cache.update(kept)
     return out
 
 

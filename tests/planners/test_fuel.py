@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from planners.astar import PathCache
 from planners.fuel import Fuel, FuelConfig, PathLengths, pose_cost
 from planners.fuel_frontier import (
     clusters,
@@ -190,15 +191,24 @@ def test_path_lengths_go_around_walls(make_stack: StackFactory) -> None:
     # A wall across the room from y = 0.5 to 2.5 m at x = 3.0 m: the way round is longer.
     state[29:31, 5:25, 3:22] = VoxelState.OCCUPIED
     view = make_stack(state, VOXEL, SAFETY).view()
-    lengths = PathLengths(view, 0.4)
+    lengths = PathLengths(view, 0.4, PathCache())
     a, b = np.array([1.55, 1.25, 1.25]), np.array([4.55, 1.25, 1.25])
-    assert lengths.straight(a, a + np.array([0.5, 0.0, 0.0]))
-    assert not lengths.straight(a, b)
-    around = lengths.length(a, b)
-    assert np.isfinite(around)
-    assert around > 3.0 + 1.0
-    # Symmetric through the cached fields.
-    assert lengths.length(b, a) == pytest.approx(around)
+    near = a + np.array([0.5, 0.0, 0.0])
+    points = np.stack([a, near, b])
+    m = lengths.matrix(points, points)
+    # In a straight line where it stays traversable, and zero to itself.
+    assert m[0, 1] == pytest.approx(0.5)
+    np.testing.assert_allclose(np.diag(m), 0.0)
+    # Around the wall otherwise: through the gap at y > 2.5 m.
+    assert np.isfinite(m[0, 2])
+    assert m[0, 2] > 3.0 + 1.0
+    # Symmetric (one cached path per pair).
+    np.testing.assert_allclose(m, m.T)
+    assert lengths.reachable(a, points).all()
+    # A second matrix reuses the cached path.
+    hits = lengths.paths.hits
+    lengths.matrix(a[None], b[None])
+    assert lengths.paths.hits == hits + 1
 
 
 def test_plans_toward_the_frontier_and_yaws_to_the_viewpoint(make_stack: StackFactory) -> None:
