@@ -212,7 +212,7 @@ class FuelPlanner(Planner):
             return Plan.finished("no coverable frontier")
         starts = escape_starts(view, obs.pose.position, cfg.escape_reach_voxels)
         if len(starts) == 0:
-            return Plan.finished("the vehicle is not in traversable space")
+            return self._stuck(obs, "the vehicle is not in traversable space")
         start_voxel = starts[0]
         pos = np.asarray(obs.pose.position, dtype=np.float64)
         lengths = PathLengths(view, cfg.path_cell_m, self._coarse_paths)
@@ -228,7 +228,7 @@ class FuelPlanner(Planner):
         self._planned = [c.voxels for c, _ in found]
         self._planned_at = obs.time
         if not active:
-            return Plan.finished("no frontier viewpoint is reachable")
+            return self._stuck(obs, "no frontier viewpoint is reachable")
         order = self._global_tour(obs, lengths, active)
         candidates = self._refine(obs, lengths, active, order)
         for position, yaw, which in candidates:
@@ -241,7 +241,14 @@ class FuelPlanner(Planner):
                 plan.info.update({"clusters": len(found), "active": len(active),
                                   "tour": len(order)})
                 return plan
-        return Plan.finished("no path to any viewpoint")
+        return self._stuck(obs, "no path to any viewpoint")
+
+    def _stuck(self, obs: Observation, why: str) -> Plan:
+        """In flight, keep flying and decide again at rest (the moving vehicle may be between
+        voxels the search can start from); at rest, the end of the exploration."""
+        if obs.last_outcome == PlanOutcome.FLYING:
+            return Plan.keep_flying(self.config.covered_check_s, info={"why": why})
+        return Plan.finished(why)
 
     def _replan_due(self, obs: Observation) -> bool:
         """FUEL's in-flight triggers: the replanning period is over, or a cluster planned with
