@@ -26,7 +26,7 @@ between the current velocity and the straight line to the goal, yaw change / yaw
 lengths: the straight line when it stays in traversable space, otherwise the shortest path on
 a coarse grid of `path_cell_m` cells (FUEL searches A* at 0.4 m).
 
-The exploration ends when no cluster has a viewpoint the vehicle can reach.
+The exploration ends when no cluster has a viewpoint, or, at rest, when none can be reached.
 """
 
 from __future__ import annotations
