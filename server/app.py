@@ -28,7 +28,7 @@ from server.catalog import sync_builtin_areas, sync_builtin_planners
 from server.db import make_engine, make_session_factory, read_only, session_scope
 from server.middleware import install_middleware
 from server.migrate import upgrade
-from server.planner_package import PlannerCheck
+from server.planner_package import CheckSlots, PlannerCheck
 from server.routes import areas, curves, groups, health, jobs, leaderboard, planners, runs
 from server.settings import Settings, load_settings
 from server.sweeper import sweep
@@ -61,6 +61,7 @@ def create_app(settings: Settings | None = None, *, sweeper: bool = True,
     app.state.sessions = sessions
     app.state.read_sessions = read_sessions
     app.state.planner_check = planner_check
+    app.state.check_slots = CheckSlots(settings.max_concurrent_checks)
     app.state.benchmark_version = benchmark_version if isinstance(benchmark_version, str) \
         else None
     app.include_router(health.router)

@@ -29,10 +29,8 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
-from typing import Literal
 
 from pydantic import BaseModel, Field
-from pydantic_settings import BaseSettings, SettingsConfigDict
 
 COMPILED_SUFFIXES = {".pyc", ".pyo", ".so", ".pyd", ".dll", ".dylib", ".o", ".a", ".exe",
                      ".whl", ".egg", ".jar", ".class", ".bin"}
@@ -92,40 +90,11 @@ class CheckUnavailableError(RuntimeError):
 PlannerCheck = Callable[[PlannerPackage], CheckOutcome]
 
 
-class SandboxPolicy(BaseSettings):
-    """How uploaded code may run, read from the environment like `server.settings.Settings`
-    (`FLYBO_*`): by the API at start-up and by the sandbox at each use."""
-
-    model_config = SettingsConfigDict(env_prefix="FLYBO_", extra="ignore")
-
-    environment: Literal["development", "production"] = "development"
-    sandbox_allow_insecure: bool = Field(
-        default=False,
-        description="run uploaded planners even without full isolation (development only: "
-                    "the fallback does not contain hostile code)")
-
-
 class SandboxPolicyError(RuntimeError):
     """The sandbox settings are not allowed in this environment (the insecure fallback in
     production): the service does not start, and uploaded code does not run."""
 
 
-def insecure_sandbox_refusal(environment: str | None = None) -> str | None:
-    """Why the sandbox settings are refused, or None. `environment` is the service's
-    (`Settings.environment`); without it, `FLYBO_ENVIRONMENT` is read."""
-    policy = SandboxPolicy()
-    if policy.sandbox_allow_insecure and (environment or policy.environment) == "production":
-        return ("FLYBO_SANDBOX_ALLOW_INSECURE is set while FLYBO_ENVIRONMENT=production: the "
-                "insecure fallback runs uploaded planners without containing them and is for "
-                "development only; unset it and give this machine the full sandbox "
-                "(docs/sandbox.md)")
-    return None
-
-
-# Uploads checked (compiled and dry-run) at once by one API process: each keeps a core busy for
-# seconds, so more would slow every check and the API with them. Per process, not per service:
-# each API process has its own count.
-MAX_CONCURRENT_CHECKS = 2
 # What a refused upload is told to wait: about one dry run of a simple planner.
 CHECKS_RETRY_AFTER_S = 15
 
@@ -154,10 +123,6 @@ class CheckSlots:
             yield
         finally:
             self._free.release()
-
-
-# The slots of this process, shared by every request thread.
-CHECK_SLOTS = CheckSlots(MAX_CONCURRENT_CHECKS)
 
 
 MAX_NAME_PART_BYTES = 255  # a file or folder name, as file systems allow

@@ -43,6 +43,16 @@ def default_cache_dir() -> Path:
     return Path.home() / ".cache" / "flybo"
 
 
+def insecure_sandbox_refusal(environment: str, allow_insecure: bool) -> str | None:
+    """Why the sandbox settings are refused (the insecure fallback in production), or None."""
+    if allow_insecure and environment == "production":
+        return ("FLYBO_SANDBOX_ALLOW_INSECURE is set while FLYBO_ENVIRONMENT=production: the "
+                "insecure fallback runs uploaded planners without containing them and is for "
+                "development only; unset it and give this machine the full sandbox "
+                "(docs/sandbox.md)")
+    return None
+
+
 class Settings(BaseSettings):
     """Everything the API, the workers and the CLI client are configured by."""
 
@@ -90,6 +100,12 @@ class Settings(BaseSettings):
                                   description="run built-in planners in the sandbox too")
     sandbox_plan_timeout_s: float = Field(default=10.0, gt=0)
     sandbox_memory_mib: int = Field(default=2048, ge=256)
+    sandbox_allow_insecure: bool = Field(
+        default=False,
+        description="run uploaded planners even without full isolation (development only: the "
+                    "fallback does not contain hostile code); refused in production")
+    max_concurrent_checks: int = Field(
+        default=2, ge=1, description="uploads compiled and dry-run at once, per API process")
 
     # Workers.
     heartbeat_interval_s: float = Field(default=3.0, gt=0)
@@ -109,6 +125,9 @@ class Settings(BaseSettings):
                 "FLYBO_SECRET_KEY must be set to a random string of at least 32 characters "
                 "when FLYBO_ENVIRONMENT=production"
             )
+        refusal = insecure_sandbox_refusal(self.environment, self.sandbox_allow_insecure)
+        if refusal is not None:
+            raise ValueError(refusal)
         return self
 
     @cached_property

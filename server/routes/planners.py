@@ -4,12 +4,10 @@ from __future__ import annotations
 
 import logging
 import tempfile
-from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Annotated
 
-from fastapi import APIRouter, FastAPI, File, Form, HTTPException, Request, UploadFile
+from fastapi import APIRouter, File, Form, HTTPException, Request, UploadFile
 from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
@@ -18,38 +16,24 @@ from server.catalog import CatalogError, find_planner
 from server.deps import SessionDep, SettingsDep, UserDep
 from server.models import PlannerRow, User
 from server.planner_package import (
-    CHECK_SLOTS,
     CHECKS_RETRY_AFTER_S,
     CheckOutcome,
     ChecksBusyError,
+    CheckSlots,
     CheckUnavailableError,
     PackageError,
     PackageLimits,
     PlannerCheck,
     PlannerPackage,
-    SandboxPolicyError,
-    insecure_sandbox_refusal,
     load_package,
 )
 from server.schemas import PlannerOut
-from server.settings import Settings
 from server.storage import ArtifactStoreError, settings_store
 
 log = logging.getLogger(__name__)
 
 
-@asynccontextmanager
-async def _refuse_insecure_sandbox(app: FastAPI) -> AsyncIterator[None]:
-    """Start-up: the insecure sandbox fallback is refused in production, before any upload."""
-    settings: Settings = app.state.settings
-    refusal = insecure_sandbox_refusal(settings.environment)
-    if refusal is not None:
-        log.critical("refusing to start: %s", refusal)
-        raise SandboxPolicyError(refusal)
-    yield
-
-
-router = APIRouter(prefix="/planners", tags=["planners"], lifespan=_refuse_insecure_sandbox)
+router = APIRouter(prefix="/planners", tags=["planners"])
 
 
 def planner_out(row: PlannerRow, owner: str | None, *, for_owner: bool = False) -> PlannerOut:
@@ -115,7 +99,8 @@ def upload_planner(
     # The check takes seconds: no transaction (on SQLite, the write lock) is held during it.
     session.commit()
     try:
-        with CHECK_SLOTS.taken():
+        slots: CheckSlots = request.app.state.check_slots
+        with slots.taken():
             package, check = _check(request, file.filename or "", data, limits)
     except ChecksBusyError as exc:
         raise HTTPException(429, str(exc),

@@ -1,5 +1,6 @@
 """The insecure sandbox fallback (`FLYBO_SANDBOX_ALLOW_INSECURE`) is refused in production: the
-API does not start, and the sandbox runs no uploaded code, whatever this machine offers."""
+settings refuse it, so no process of the service (API, worker, CLI) starts with it, and the
+sandbox runs no uploaded code under such settings, whatever this machine offers."""
 
 from __future__ import annotations
 
@@ -7,9 +8,10 @@ from pathlib import Path
 
 import pytest
 from fastapi.testclient import TestClient
+from pydantic import ValidationError
 
 from server.app import create_app
-from server.planner_package import CheckUnavailableError, SandboxPolicyError, load_package
+from server.planner_package import CheckUnavailableError, load_package
 from server.settings import Settings
 from worker.sandbox import isolation
 from worker.sandbox.dry_run import dry_run
@@ -31,15 +33,15 @@ def _settings(tmp_path: Path, environment: str) -> Settings:
     return Settings(data_dir=tmp_path / "data", environment=environment, secret_key=SECRET)
 
 
-def test_the_api_refuses_to_start_with_it_in_production(
+def test_the_settings_refuse_it_in_production(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("FLYBO_SANDBOX_ALLOW_INSECURE", "1")
-    app = create_app(_settings(tmp_path, "production"), sweeper=False, sync_areas=False)
-    with pytest.raises(SandboxPolicyError) as refused, TestClient(app):
-        pytest.fail("the API started")
+    with pytest.raises(ValidationError) as refused:
+        _settings(tmp_path, "production")
     message = str(refused.value)
     assert "FLYBO_SANDBOX_ALLOW_INSECURE" in message and "FLYBO_ENVIRONMENT=production" in message
     assert "development only" in message
+    assert _settings(tmp_path, "development").sandbox_allow_insecure
 
 
 @pytest.mark.parametrize(("environment", "insecure"), [
@@ -61,6 +63,7 @@ def test_the_sandbox_runs_no_uploaded_code_with_it_in_production(
     # as the platform's failure, even where full isolation would not need the fallback.
     monkeypatch.setenv("FLYBO_SANDBOX_ALLOW_INSECURE", "true")
     monkeypatch.setenv("FLYBO_ENVIRONMENT", "production")
+    monkeypatch.setenv("FLYBO_SECRET_KEY", SECRET)
     with pytest.raises(isolation.SandboxPolicyError, match="FLYBO_ENVIRONMENT=production"):
         isolation.require_full()
     code = tmp_path / "code"

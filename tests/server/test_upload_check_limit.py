@@ -1,5 +1,6 @@
-"""At most `MAX_CONCURRENT_CHECKS` uploads are checked at once by one API process: the next one
-is answered 429 with a Retry-After header and stores nothing; a freed slot takes uploads again.
+"""At most `Settings.max_concurrent_checks` uploads are checked at once by one API process: the
+next one is answered 429 with a Retry-After header and stores nothing; a freed slot takes uploads
+again.
 
 The uploads are real concurrent requests against the real app; the dry run is one that waits for
 the test to let it finish, so that the uploads are known to be in their check together.
@@ -23,11 +24,13 @@ from server.app import create_app as create_api
 from server.models import PlannerRow
 from server.planner_package import (
     CHECKS_RETRY_AFTER_S,
-    MAX_CONCURRENT_CHECKS,
     CheckOutcome,
     PlannerPackage,
 )
 from server.settings import Settings
+
+# The default of `Settings.max_concurrent_checks`.
+MAX_CONCURRENT_CHECKS = Settings.model_fields["max_concurrent_checks"].default
 
 GOOD = b'''
 import numpy as np

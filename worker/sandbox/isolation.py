@@ -36,8 +36,10 @@ import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from pydantic import ValidationError
+
 from server import planner_package
-from server.planner_package import SandboxPolicy, insecure_sandbox_refusal
+from server.settings import load_settings
 from worker.sandbox import seccomp_filter
 
 # Re-exported: the sandbox's parts, as the rest of the project has always imported them.
@@ -62,7 +64,7 @@ from worker.sandbox.packages import (
 )
 
 __all__ = ["HIDDEN_PACKAGES", "MIN_BWRAP", "NAMESPACE_ARGS", "VISIBLE_PACKAGES", "Cgroups",
-           "Isolation", "SandboxLimits", "SandboxPolicy", "SandboxPolicyError",
+           "Isolation", "SandboxLimits", "SandboxPolicyError",
            "SandboxUnavailableError", "child_paths", "command", "insecure_allowed",
            "library_dirs", "make_cgroups", "package_dirs", "preexec", "probe", "python_path",
            "require_full", "scratch_args", "seed_numba_cache"]
@@ -178,10 +180,14 @@ def _probe_bwrap(bwrap: str, *, seccomp: bool = False) -> tuple[bool, str | None
 def insecure_allowed() -> bool:
     """Whether the operator set `FLYBO_SANDBOX_ALLOW_INSECURE`, read at each call;
     `SandboxPolicyError` where that is refused (`FLYBO_ENVIRONMENT=production`)."""
-    refusal = insecure_sandbox_refusal()
-    if refusal is not None:
-        raise SandboxPolicyError(refusal)
-    return SandboxPolicy().sandbox_allow_insecure
+    try:
+        settings = load_settings()
+    except ValidationError as exc:
+        # Settings that would not let the service start (the fallback in production, say):
+        # nothing uploaded runs under them.
+        problems = "; ".join(str(e.get("msg", "invalid")) for e in exc.errors())
+        raise SandboxPolicyError(f"the service's settings are refused: {problems}") from None
+    return settings.sandbox_allow_insecure
 
 
 def require_full(what: str = "uploaded planners") -> Isolation:
