@@ -1,7 +1,8 @@
 """The built-in planners: every id and version in one place.
 
-`register_builtins` is called by the registry exactly once, before any other registration or
-lookup; importing this module registers nothing.
+`BUILTINS` is data: the registry (`planners.registry`) registers it exactly once, before any
+other registration or lookup; importing this module registers nothing, and it does not import
+the registry.
 
 A registered id keeps its code: a change of a planner's behaviour is registered as a new version
 beside the old one (a new config model, or a flag of the shared class), never as an edit of the
@@ -18,7 +19,6 @@ from planners.esm import Esm, EsmRecon
 from planners.fuel import Fuel
 from planners.nbvp import Nbvp
 from planners.rapid import Rapid, RapidV2
-from planners.registry import register
 from planners.splat import SplatPlanner, SplatPlannerV2
 
 _CLASSIC_REFERENCE = "B. Yamauchi, A frontier-based approach for autonomous exploration, CIRA 1997"
@@ -117,8 +117,3 @@ BUILTINS: tuple[tuple[str, int, type[Planner], str, str], ...] = (
     ),
 )
 
-
-def register_builtins() -> None:
-    """Register every built-in planner (called by `planners.registry`)."""
-    for name, version, cls, description, reference in BUILTINS:
-        register(name, version, cls, description=description, reference=reference)

@@ -165,13 +165,15 @@ def _ensure_builtins() -> None:
     with _LOCK:
         if _builtins_loaded or _origin == BUILTIN:
             return
-        # Imported here: the planner modules import this one.
-        from planners.builtin import register_builtins
+        # Imported at the first lookup, not with this module: the built-ins import every planner
+        # and its numerical libraries, which a plugin registering itself does not need.
+        from planners.builtin import BUILTINS
 
         before, previous = _snapshot(), _origin
         _origin = BUILTIN
         try:
-            register_builtins()
+            for name, version, cls, description, reference in BUILTINS:
+                register(name, version, cls, description=description, reference=reference)
         except BaseException:
             _restore(before)
             raise

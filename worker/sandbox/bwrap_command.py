@@ -6,13 +6,10 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
 
+from worker.sandbox.isolation_level import Isolation
 from worker.sandbox.limits import SandboxLimits
 from worker.sandbox.packages import hidden_dirs, library_dirs, package_dirs, prefixes, python_path
-
-if TYPE_CHECKING:
-    from worker.sandbox.isolation import Isolation
 
 # The working folder and the numba seed as the planner process sees them.
 SANDBOX_WORK = "/sandbox/work"

@@ -1,21 +1,21 @@
 """The pids and memory cgroups of planner processes: found writable (`cgroup_root`), made one per
-process with its limits (`make_cgroups`), and removed with whatever is left in them."""
+process with its limits (`make_cgroups`), joined with the rlimits set as the process starts
+(`preexec`), and removed with whatever is left in them."""
 
 from __future__ import annotations
 
 import contextlib
 import os
+import resource
 import threading
 import time
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
+from worker.sandbox.isolation_level import Isolation
 from worker.sandbox.limits import SandboxLimits
-
-if TYPE_CHECKING:
-    from worker.sandbox.isolation import Isolation
 
 CGROUP_V1 = Path("/sys/fs/cgroup")
 
@@ -129,3 +129,26 @@ def make_cgroups(iso: Isolation, limits: SandboxLimits) -> Cgroups:
             paths.append(path)
         memory = path
     return Cgroups(paths, memory)
+
+
+def preexec(limits: SandboxLimits, cgroups: Cgroups, iso: Isolation) -> Callable[[], None]:
+    """Runs in the forked child before exec: join the cgroups, set the rlimits."""
+    targets = [str(p / "cgroup.procs") for p in cgroups.paths]
+
+    def apply() -> None:
+        pid = str(os.getpid())
+        for target in targets:
+            with open(target, "w") as fh:
+                fh.write(pid)
+        mib = 1024 * 1024
+        resource.setrlimit(resource.RLIMIT_CPU, (limits.cpu_seconds, limits.cpu_seconds + 5))
+        resource.setrlimit(resource.RLIMIT_NOFILE, (limits.open_files, limits.open_files))
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limits.file_size_mib * mib,) * 2)
+        resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+        resource.setrlimit(resource.RLIMIT_NPROC, (limits.processes, limits.processes))
+        if iso.cgroup_memory is None:
+            # Address space, not resident memory: generous, since numba and BLAS reserve a lot.
+            space = 4 * limits.memory_mib * mib
+            resource.setrlimit(resource.RLIMIT_AS, (space, space))
+
+    return apply

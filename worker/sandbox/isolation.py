@@ -33,8 +33,6 @@ import logging
 import os
 import shutil
 import subprocess
-from dataclasses import dataclass, field
-from pathlib import Path
 
 from pydantic import ValidationError
 
@@ -52,8 +50,9 @@ from worker.sandbox.bwrap_command import (
     scratch_args,
     seccomp_args,
 )
-from worker.sandbox.cgroups import Cgroups, cgroup_root, make_cgroups
-from worker.sandbox.limits import SandboxLimits, preexec
+from worker.sandbox.cgroups import Cgroups, cgroup_root, make_cgroups, preexec
+from worker.sandbox.isolation_level import Isolation
+from worker.sandbox.limits import SandboxLimits
 from worker.sandbox.packages import (
     HIDDEN_PACKAGES,
     VISIBLE_PACKAGES,
@@ -78,26 +77,6 @@ class SandboxUnavailableError(RuntimeError):
 
 class SandboxPolicyError(SandboxUnavailableError, planner_package.SandboxPolicyError):
     """The insecure fallback is set where it is refused: uploaded code does not run."""
-
-
-@dataclass(frozen=True)
-class Isolation:
-    """What this machine offers: bubblewrap with namespaces, and which cgroup controllers."""
-
-    bwrap: str | None
-    namespaces: bool
-    cgroup_pids: Path | None
-    cgroup_memory: Path | None
-    notes: list[str] = field(default_factory=list)
-    # The seccomp filter (`seccomp_filter`) is loaded: a further layer, not needed for `full`.
-    seccomp: bool = False
-
-    @property
-    def full(self) -> bool:
-        """Bubblewrap with namespaces, and the pids and memory cgroups: what uploaded code
-        needs."""
-        return bool(self.bwrap and self.namespaces and self.cgroup_pids is not None
-                    and self.cgroup_memory is not None)
 
 
 _full_isolation: Isolation | None = None
