@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from planners.astar import PathCache
-from planners.fuel import Fuel, FuelConfig, PathLengths, pose_cost
+from planners.fuel import Fuel, FuelConfig
+from planners.fuel_costs import PathLengths, pose_cost
 from planners.fuel_frontier import (
     clusters,
     coverage,

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from planners.registry import make
-from planners.splat import SplatConfig, SplatPlanner, flight_time, frontier_normals
+from planners.splat import SplatConfig, SplatPlanner
+from planners.splat_features import flight_time, frontier_normals
 from sim.camera import CameraConfig
 from sim.geometry import Pose
 from sim.interface import Observation, PlannerContext, PlanOutcome
