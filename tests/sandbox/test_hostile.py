@@ -199,8 +199,7 @@ def test_the_context_sent_hides_the_area_only() -> None:
     from sim.geometry import Pose
     from sim.interface import PlannerContext
     from sim.vehicle import VehicleLimits
-    from worker.sandbox.protocol import decode_context, encode_context
-    from worker.sandbox.proxy import HIDDEN_AREA, hide_area
+    from worker.sandbox.protocol import HIDDEN_AREA, decode_context, encode_context, hide_area
 
     ctx = PlannerContext("maze", np.zeros(3), np.ones(3), Pose(np.zeros(3), 0.0),
                          VehicleLimits(), 0.4, CameraConfig(), np.random.default_rng(3))

@@ -236,7 +236,7 @@ def test_the_api_refuses_bad_names_with_422(api: tuple[TestClient, dict[str, str
 # -- what the planner process reports ----------------------------------------------------------
 
 def test_only_known_timing_keys_are_kept() -> None:
-    from worker.sandbox.proxy import clean_timing
+    from worker.sandbox.protocol import clean_timing
 
     hostile = {"map": 1.5, "plan": 2, "extra": 3.0, "planner_ms": 9.0, **{str(i): i for i in
                                                                            range(1000)}}

@@ -88,3 +88,12 @@ def child_paths(iso: Isolation, *, numba_seed: Path, code: Path | None,
         return ("/sandbox/map/" + map_file.name, NUMBA_SEED,
                 "/sandbox/code" if code is not None else None)
     return str(map_file), str(numba_seed), str(code) if code is not None else None
+
+
+def host_environment(work: Path) -> dict[str, str]:
+    """The planner process's environment where it runs without bubblewrap (built-in planners,
+    the insecure fallback), its working folder `work` on the host; with bubblewrap, `command`
+    replaces it (`--clearenv`)."""
+    return {"PATH": "/usr/bin:/bin", "HOME": str(work), "PYTHONPATH": python_path(),
+            "OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
+            "NUMBA_CACHE_DIR": str(work / ".numba-cache")}

@@ -27,6 +27,7 @@ from sim.interface import Observation, Plan, PlannerContext
 from sim.map_view import MapView
 from sim.occupancy import DirtyBoxSubscription, IndexBox
 from worker.sandbox import cpu_usage, isolation, seccomp_filter
+from worker.sandbox.bwrap_command import host_environment
 from worker.sandbox.exit_reasons import exit_reason, stderr_tail
 from worker.sandbox.isolation import SandboxLimits
 from worker.sandbox.pipe import (
@@ -38,7 +39,6 @@ from worker.sandbox.pipe import (
     write_all,
 )
 from worker.sandbox.protocol import (
-    HIDDEN_AREA,
     MAX_MESSAGE_BYTES,
     ProtocolError,
     box_message,
@@ -51,7 +51,7 @@ from worker.sandbox.protocol import (
     parse_message,
 )
 
-__all__ = ["HIDDEN_AREA", "SandboxError", "SandboxedPlanner", "clean_timing", "hide_area"]
+__all__ = ["SandboxError", "SandboxedPlanner"]
 
 log = logging.getLogger(__name__)
 
@@ -145,12 +145,9 @@ class SandboxedPlanner:
         shutil.rmtree(self.shm_dir, ignore_errors=True)
 
     def cpu_seconds(self) -> float:
-        """CPU seconds the sandbox has used so far, as the kernel counts them: every thread of
-        bubblewrap, the planner process and anything it started (`cpu_usage.cpu_seconds`).
-
-        The episode runner charges a `plan` call the difference of this before and after it;
-        the planner's own report of its time is never used. Never decreases (a process that
-        ended between two readings is not subtracted); 0 before the sandbox starts."""
+        """CPU seconds of bubblewrap, the planner process and all it started, as the kernel
+        counts them (`cpu_usage.cpu_seconds`): a `plan` call is charged the difference, never
+        the planner's own report. Never decreases; 0 before the sandbox starts."""
         if self.proc is None or self.proc.returncode is not None:
             return self._cpu_seconds  # not started, or ended and reaped: its pid may be reused
         cgroups = self.cgroups.paths if self.cgroups is not None else []
@@ -180,15 +177,10 @@ class SandboxedPlanner:
             seccomp_fd=seccomp_fd)
         passed = (to_child_r, from_child_w) + ((seccomp_fd,) if seccomp_fd is not None else ())
         self.cgroups = isolation.make_cgroups(self.iso, self.limits)
-        # Without bubblewrap (built-in planners, the insecure fallback) the working folder is
-        # `self.work` on the host; with it, this environment is replaced by `--clearenv`.
-        env = {"PATH": "/usr/bin:/bin", "HOME": str(self.work),
-               "PYTHONPATH": isolation.python_path(), "OMP_NUM_THREADS": "1",
-               "NUMBA_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
-               "NUMBA_CACHE_DIR": str(self.work / ".numba-cache")}
         with self.stderr_path.open("wb") as err:
             self.proc = subprocess.Popen(
-                args, stdin=subprocess.DEVNULL, stdout=err, stderr=err, env=env,
+                args, stdin=subprocess.DEVNULL, stdout=err, stderr=err,
+                env=host_environment(self.work),
                 cwd=self.work, pass_fds=passed, start_new_session=True,
                 preexec_fn=isolation.preexec(self.limits, self.cgroups, self.iso))
         for fd in passed:
