@@ -8,17 +8,20 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import timedelta
 
-from sqlalchemy import and_, exists, func, select
+from sqlalchemy import Connection, and_, bindparam, exists, func, select
 from sqlalchemy.orm import Session
 
 from server.catalog import CatalogError, ensure_area, find_planner, preset_names
 from server.models import (
     ACTIVE_STATES,
+    AreaRow,
     FailureKind,
     Job,
+    PlannerRow,
     Run,
     RunState,
     User,
@@ -160,11 +163,16 @@ def _job_areas(job: Job) -> list[str]:
 
 def job_status(job: Job) -> tuple[str, float]:
     """The job's state and progress (0-1), derived from its runs."""
-    states = [r.status for r in job.runs]
+    return status_of([(r.status, r.progress) for r in job.runs])
+
+
+def status_of(runs: Sequence[tuple[str, float]]) -> tuple[str, float]:
+    """A job's state and progress (0-1) from its runs' (status, progress), in run order."""
+    states = [s for s, _ in runs]
     if not states:
         return RunState.SUCCEEDED.value, 1.0
     finals = [RunState(s).final for s in states]
-    progress = sum(1.0 if f else r.progress for f, r in zip(finals, job.runs, strict=True))
+    progress = sum(1.0 if f else p for f, (_, p) in zip(finals, runs, strict=True))
     progress /= len(states)
     if all(finals):
         if RunState.FAILED.value in states:
@@ -187,4 +195,48 @@ def job_out(job: Job) -> JobOut:
         runs=[RunBrief(id=r.id, area=r.area.name, seed=r.seed, status=r.status,
                        progress=round(1.0 if RunState(r.status).final else r.progress, 4))
               for r in job.runs],
+    )
+
+
+_JOBS, _RUNS = Job.__table__, Run.__table__
+_PLANNERS, _USERS, _AREAS = PlannerRow.__table__, User.__table__, AreaRow.__table__
+# One round trip for the job and its runs (a job without runs gives one row of NULL run
+# columns), as plain rows: polling reads this every few seconds per client, and loading the
+# ORM objects behind `job_out` cost ~10 ms per answer.
+_READ_JOB = (
+    select(_JOBS.c.id, _JOBS.c.preset, _JOBS.c.seconds, _JOBS.c.runs_per_area,
+           _JOBS.c.created_at, _JOBS.c.rerun_of_id, _JOBS.c.group_id,
+           _PLANNERS.c.name.label("planner_name"), _PLANNERS.c.version.label("planner_version"),
+           _USERS.c.name.label("owner"), _RUNS.c.id.label("run_id"),
+           _AREAS.c.name.label("area"), _RUNS.c.seed, _RUNS.c.status, _RUNS.c.progress)
+    .select_from(
+        _JOBS.join(_PLANNERS, _PLANNERS.c.id == _JOBS.c.planner_id)
+        .join(_USERS, _USERS.c.id == _JOBS.c.user_id)
+        .outerjoin(_RUNS, _RUNS.c.job_id == _JOBS.c.id)
+        .outerjoin(_AREAS, _AREAS.c.id == _RUNS.c.area_id))
+    .where(_JOBS.c.id == bindparam("job_id"))
+    .order_by(_RUNS.c.id)
+)
+
+
+def read_job(conn: Connection, job_id: int) -> JobOut | None:
+    """What `job_out` answers for the job, read with one Core query; None if there is none."""
+    rows = conn.execute(_READ_JOB, {"job_id": job_id}).all()
+    if not rows:
+        return None
+    job = rows[0]
+    runs = [r for r in rows if r.run_id is not None]
+    status, progress = status_of([(r.status, r.progress) for r in runs])
+    areas: list[str] = []
+    for r in runs:
+        if r.area not in areas:
+            areas.append(r.area)
+    return JobOut(
+        id=job.id, status=status, progress=round(progress, 4),
+        planner=f"{job.planner_name}-v{job.planner_version}", preset=job.preset,
+        seconds=job.seconds, runs_per_area=job.runs_per_area, areas=areas, owner=job.owner,
+        created_at=job.created_at, rerun_of=job.rerun_of_id, group_id=job.group_id,
+        runs=[RunBrief(id=r.run_id, area=r.area, seed=r.seed, status=r.status,
+                       progress=round(1.0 if RunState(r.status).final else r.progress, 4))
+              for r in runs],
     )

@@ -1,7 +1,14 @@
-"""Jobs: a planner on some areas, several seeded runs each."""
+"""Jobs: a planner on some areas, several seeded runs each.
+
+`GET /jobs/{id}` is what clients poll: it is read with one Core query (`server.jobs.read_job`)
+and carries a strong ETag (a hash of the body), so that a client sending it back in
+If-None-Match gets 304 without a body while nothing changed, and `Retry-After` as a polling
+hint while the job is queued or running.
+"""
 
 from __future__ import annotations
 
+import hashlib
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Header, HTTPException, Query, Response
@@ -9,8 +16,9 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import selectinload
 
 from server.deps import IdPath, SessionDep, SettingsDep, UserDep
-from server.jobs import cancel_job, create_job, job_out, may_manage, rerun_job
-from server.models import AreaRow, Job, PlannerRow, Run, User
+from server.jobs import cancel_job, create_job, job_out, may_manage, read_job, rerun_job
+from server.models import AreaRow, Job, PlannerRow, Run, RunState, User
+from server.routes.leaderboard import CACHE_CONTROL, etag_matches
 from server.schemas import ErrorBody, JobCreate, JobOut, Page
 from server.submit import submit
 
@@ -18,6 +26,9 @@ router = APIRouter(prefix="/jobs", tags=["jobs"])
 
 _ERRORS: dict[int | str, dict[str, Any]] = {
     401: {"model": ErrorBody}, 403: {"model": ErrorBody}, 404: {"model": ErrorBody}}
+# Seconds a poller should wait before asking again about a job that is not final: the worker
+# reports progress about this often, and the job page polls at this pace.
+POLL_AFTER_S = 2
 
 
 def _load(session: SessionDep, job_id: int) -> Job:
@@ -78,9 +89,32 @@ def list_jobs(
                         offset=offset)
 
 
-@router.get("/{job_id}", response_model=JobOut, responses=_ERRORS)
-def get_job(job_id: IdPath, session: SessionDep) -> JobOut:
-    return job_out(_load(session, job_id))
+def job_etag(body: bytes) -> str:
+    """A strong ETag: equal exactly when the bodies are byte for byte equal."""
+    return '"' + hashlib.sha256(body).hexdigest()[:32] + '"'
+
+
+@router.get("/{job_id}", response_model=JobOut,
+            responses={**_ERRORS,
+                       304: {"description": "unchanged since the ETag sent in If-None-Match"}})
+def get_job(
+    job_id: IdPath,
+    session: SessionDep,
+    if_none_match: Annotated[str | None, Header(max_length=1024)] = None,
+) -> Response:
+    job = read_job(session.connection(), job_id)
+    if job is None:
+        raise HTTPException(404, f"no job with id {job_id}")
+    # Serialized as FastAPI would for `response_model=JobOut`, so the bytes hashed are the
+    # bytes sent.
+    body = job.model_dump_json().encode()
+    etag = job_etag(body)
+    headers = {"ETag": etag, "Cache-Control": CACHE_CONTROL}
+    if not RunState(job.status).final:
+        headers["Retry-After"] = str(POLL_AFTER_S)
+    if etag_matches(if_none_match, etag):
+        return Response(status_code=304, headers=headers)
+    return Response(body, media_type="application/json", headers=headers)
 
 
 @router.post("/{job_id}/cancel", response_model=JobOut,
