@@ -31,7 +31,9 @@ from common import print_table, write_json
 HEADER = "import numpy as np\nfrom planners.api import Plan, Planner\n\n"
 # Each stays within the upload's static checks and is stopped by a sandbox limit instead.
 HOSTILE = {
-    "spins at import": HEADER + "while True:\n    pass\n",
+    "spins at import": HEADER + (
+        "class Spin(Planner):\n    def plan(self, obs):\n"
+        "        return Plan(np.array([[*obs.pose.position, 0.0]]))\n\n\nwhile True:\n    pass\n"),
     "sleeps in every call": HEADER + (
         "import time\n\nclass Slow(Planner):\n    def plan(self, obs):\n"
         "        time.sleep(30)\n        return Plan(np.array([[*obs.pose.position, 0.0]]))\n"),

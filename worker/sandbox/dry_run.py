@@ -1,7 +1,17 @@
-"""The upload check's dry run: the planner flies a tiny room for a few simulated seconds."""
+"""The upload check's dry run: the planner flies a tiny room for a few simulated seconds.
+
+The flight runs in a process of its own (`python -m worker.sandbox.dry_run`), one thread, with
+the planner in the sandbox below it: the simulation's CPU and memory stay out of the process
+that called `dry_run` (the API), which only waits for the verdict.
+"""
 
 from __future__ import annotations
 
+import argparse
+import json
+import os
+import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -12,8 +22,12 @@ from typing import Any
 from server.planner_package import CheckOutcome, CheckUnavailableError, PlannerPackage
 from worker.sandbox import isolation
 from worker.sandbox.isolation import SandboxLimits
+from worker.threads import thread_environment
 
 DRY_RUN_SECONDS = 10.0
+# The flight's process, beyond the dry run's own clock: starting Python and the simulation, and
+# building the room.
+PROCESS_GRACE_S = 60.0
 
 
 @lru_cache(maxsize=1)
@@ -31,15 +45,11 @@ def tiny_area() -> tuple[Any, Any]:
     return area, compute_ground_truth(area)
 
 
-def dry_run(package: PlannerPackage, *, timeout_s: float = 60.0) -> CheckOutcome:
-    """Run the package's planner in the sandbox on `tiny_area` for `DRY_RUN_SECONDS`.
+def fly(code: Path, timeout_s: float) -> CheckOutcome:
+    """The dry run itself, in this process: the planner in folder `code`, in the sandbox, on
+    `tiny_area` for `DRY_RUN_SECONDS`, within `timeout_s` of wall time.
 
-    Raises `CheckUnavailableError` where the sandbox cannot contain uploaded code
-    (`isolation.require_full`)."""
-    try:
-        isolation.require_full("the dry run of uploaded planners")
-    except isolation.SandboxUnavailableError as exc:
-        raise CheckUnavailableError(str(exc)) from None
+    Raises `CheckUnavailableError` where the sandbox cannot contain uploaded code."""
     from sim.config import preset
     from sim.episode import run_episode
     from sim.result import RunStatus
@@ -49,29 +59,27 @@ def dry_run(package: PlannerPackage, *, timeout_s: float = 60.0) -> CheckOutcome
     started = time.monotonic()
     limits = SandboxLimits(start_timeout_s=timeout_s, plan_timeout_s=min(10.0, timeout_s),
                            run_planning_budget_s=timeout_s)
-    with tempfile.TemporaryDirectory(prefix="flybo-check-") as tmp:
-        code = package.extract(Path(tmp) / "code")
+    try:
+        planner = SandboxedPlanner(code=code, limits=limits)
+    except isolation.SandboxUnavailableError as exc:
+        raise CheckUnavailableError(str(exc)) from None
+    # The per-call limits and the planning budget leave the time between calls and the
+    # start open: the whole dry run gets a wall-clock limit of its own.
+    clock = threading.Timer(timeout_s, planner.kill,
+                            args=(f"the dry run took longer than {timeout_s:g} s",))
+    clock.daemon = True
+    with planner:
+        clock.start()
         try:
-            planner = SandboxedPlanner(code=code, limits=limits)
-        except isolation.SandboxUnavailableError as exc:
-            raise CheckUnavailableError(str(exc)) from None
-        # The per-call limits and the planning budget leave the time between calls and the
-        # start open: the whole dry run gets a wall-clock limit of its own.
-        clock = threading.Timer(timeout_s, planner.kill,
-                                args=(f"the dry run took longer than {timeout_s:g} s",))
-        clock.daemon = True
-        with planner:
-            clock.start()
-            try:
-                result = run_episode(area, truth, planner, preset("exact"), 0,
-                                     planner_name="check", preset_name="exact",
-                                     seconds=DRY_RUN_SECONDS)
-            except SandboxError as exc:
-                return CheckOutcome(False, f"{exc}\n{planner.stderr_tail()}".strip(),
-                                    time.monotonic() - started)
-            finally:
-                clock.cancel()
-            output = planner.stderr_tail()
+            result = run_episode(area, truth, planner, preset("exact"), 0,
+                                 planner_name="check", preset_name="exact",
+                                 seconds=DRY_RUN_SECONDS)
+        except SandboxError as exc:
+            return CheckOutcome(False, f"{exc}\n{planner.stderr_tail()}".strip(),
+                                time.monotonic() - started)
+        finally:
+            clock.cancel()
+        output = planner.stderr_tail()
     wall = time.monotonic() - started
     if result.status is RunStatus.FAILED:
         return CheckOutcome(False, f"the dry run failed: {result.reason}\n{output}".strip(), wall)
@@ -81,3 +89,57 @@ def dry_run(package: PlannerPackage, *, timeout_s: float = 60.0) -> CheckOutcome
                               f"{result.iterations} plans, explored "
                               f"{result.explored_volume_m3:.1f} m³, {result.reason}\n{output}"
                         .strip(), wall)
+
+
+def dry_run(package: PlannerPackage, *, timeout_s: float = 60.0) -> CheckOutcome:
+    """Run the package's planner in the sandbox on `tiny_area` for `DRY_RUN_SECONDS`, in a
+    process of its own (`fly` there).
+
+    Raises `CheckUnavailableError` where the sandbox cannot contain uploaded code
+    (`isolation.require_full`)."""
+    try:
+        isolation.require_full("the dry run of uploaded planners")
+    except isolation.SandboxUnavailableError as exc:
+        raise CheckUnavailableError(str(exc)) from None
+    started = time.monotonic()
+    with tempfile.TemporaryDirectory(prefix="flybo-check-") as tmp:
+        code = package.extract(Path(tmp) / "code")
+        try:
+            done = subprocess.run(
+                [sys.executable, "-P", "-m", "worker.sandbox.dry_run", "--code", str(code),
+                 "--timeout", repr(timeout_s)],
+                env=thread_environment(1, os.environ), stdin=subprocess.DEVNULL,
+                capture_output=True, text=True, timeout=timeout_s + PROCESS_GRACE_S)
+        except subprocess.TimeoutExpired:
+            return CheckOutcome(False, f"the dry run took longer than {timeout_s:g} s",
+                                time.monotonic() - started)
+    try:
+        verdict = json.loads(done.stdout.strip().splitlines()[-1])
+    except (IndexError, ValueError):
+        # The flight's process itself failed: the platform's fault, not the planner's.
+        raise CheckUnavailableError(
+            f"the dry run's process ended with code {done.returncode}: "
+            f"{done.stderr.strip()[-500:]}") from None
+    if "unavailable" in verdict:
+        raise CheckUnavailableError(str(verdict["unavailable"]))
+    return CheckOutcome(bool(verdict["passed"]), str(verdict["output"]), float(verdict["wall_s"]))
+
+
+def main(argv: list[str] | None = None) -> None:
+    """`python -m worker.sandbox.dry_run --code DIR --timeout S`: `fly`, the verdict as one line
+    of JSON on stdout."""
+    parser = argparse.ArgumentParser(description=main.__doc__)
+    parser.add_argument("--code", type=Path, required=True)
+    parser.add_argument("--timeout", type=float, required=True)
+    args = parser.parse_args(argv)
+    try:
+        outcome = fly(args.code, args.timeout)
+    except CheckUnavailableError as exc:
+        print(json.dumps({"unavailable": str(exc)}), flush=True)
+        return
+    print(json.dumps({"passed": outcome.passed, "output": outcome.output,
+                      "wall_s": outcome.wall_s}), flush=True)
+
+
+if __name__ == "__main__":
+    main()
