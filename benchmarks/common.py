@@ -1,12 +1,20 @@
-"""What the benchmark scripts share: a results folder and table printing."""
+"""What the benchmark scripts share: a results folder, table printing, and starting `flybo serve`
+in a fresh data folder."""
 
 from __future__ import annotations
 
 import json
+import os
 import platform
 import resource
+import socket
+import subprocess
+import sys
+import time
 from pathlib import Path
 from typing import Any
+
+import httpx
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -33,3 +41,39 @@ def print_table(title: str, header: list[str], rows: list[list[Any]]) -> None:
     print("  ".join("-" * w for w in widths))
     for row in cells:
         print("  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)))
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def service_env(data_dir: Path | str) -> dict[str, str]:
+    """This environment without its `FLYBO_*` settings, with `data_dir` as the data folder (and
+    the caller's cache folder, if set, so areas are not rebuilt)."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("FLYBO_")}
+    env["FLYBO_DATA_DIR"] = str(data_dir)
+    if "FLYBO_CACHE_DIR" in os.environ:
+        env["FLYBO_CACHE_DIR"] = os.environ["FLYBO_CACHE_DIR"]
+    return env
+
+
+def create_token(env: dict[str, str], user: str) -> str:
+    """A new API token for `user`, by `flybo tokens create` with the service's settings `env`."""
+    return subprocess.run([sys.executable, "-m", "flybo", "tokens", "create", "--user", user],
+                          env=env, check=True, capture_output=True, text=True).stdout.strip()
+
+
+def wait_healthy(base: str, timeout_s: float = 120.0) -> float:
+    """Seconds until `base`/healthz answers 200; SystemExit after `timeout_s`."""
+    t0 = time.monotonic()
+    while True:
+        try:
+            if httpx.get(f"{base}/healthz", timeout=2).status_code == 200:
+                return time.monotonic() - t0
+        except httpx.HTTPError:
+            pass
+        if time.monotonic() - t0 > timeout_s:
+            raise SystemExit(f"flybo serve at {base} did not answer within {timeout_s:g} s")
+        time.sleep(0.2)

@@ -11,8 +11,6 @@ refused by the dry run, 429 over the limit of checks at once, others).
 from __future__ import annotations
 
 import argparse
-import os
-import socket
 import statistics
 import subprocess
 import sys
@@ -26,7 +24,7 @@ from pathlib import Path
 import httpx
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import print_table, write_json
+from common import create_token, free_port, print_table, service_env, wait_healthy, write_json
 
 HEADER = "import numpy as np\nfrom planners.api import Plan, Planner\n\n"
 # Each stays within the upload's static checks and is stopped by a sandbox limit instead.
@@ -41,25 +39,6 @@ HOSTILE = {
         "class Greedy(Planner):\n    def plan(self, obs):\n        hoard = []\n"
         "        while True:\n            hoard.append(bytearray(64 * 1024 * 1024))\n"),
 }
-
-
-def _port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def _env(data: str) -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if not k.startswith("FLYBO_")}
-    env["FLYBO_DATA_DIR"] = data
-    if "FLYBO_CACHE_DIR" in os.environ:
-        env["FLYBO_CACHE_DIR"] = os.environ["FLYBO_CACHE_DIR"]
-    return env
-
-
-def _token(env: dict[str, str], user: str) -> str:
-    return subprocess.run([sys.executable, "-m", "flybo", "tokens", "create", "--user", user],
-                          env=env, check=True, capture_output=True, text=True).stdout.strip()
 
 
 def _poll(base: str, stop: threading.Event, out: list[float], errors: list[str]) -> None:
@@ -95,25 +74,16 @@ def main() -> None:
     args = parser.parse_args()
     rows, report = [], []
     with tempfile.TemporaryDirectory(prefix="flybo-bench-") as tmp:
-        env = _env(tmp)
-        tokens = [_token(env, f"user{i}") for i in range(args.uploads)]
-        port = _port()
+        env = service_env(tmp)
+        tokens = [create_token(env, f"user{i}") for i in range(args.uploads)]
+        port = free_port()
         base = f"http://127.0.0.1:{port}"
         with open(Path(tmp) / "serve.log", "wb") as log:
             proc = subprocess.Popen([sys.executable, "-m", "flybo", "serve", "--port", str(port),
                                      "--no-viewer"], env=env, stdout=log,
                                     stderr=subprocess.STDOUT)
         try:
-            deadline = time.monotonic() + 120
-            while True:
-                try:
-                    if httpx.get(f"{base}/healthz", timeout=2).status_code == 200:
-                        break
-                except httpx.HTTPError:
-                    pass
-                if time.monotonic() > deadline:
-                    raise SystemExit("flybo serve did not start: see its log")
-                time.sleep(0.2)
+            wait_healthy(base)
             for round_ in range(args.rounds):
                 for k, (kind, source) in enumerate(HOSTILE.items()):
                     latencies: list[float] = []

@@ -8,8 +8,6 @@ the target (under 2 minutes). Run: `.venv/bin/python benchmarks/service_job.py`.
 from __future__ import annotations
 
 import argparse
-import os
-import socket
 import subprocess
 import sys
 import tempfile
@@ -19,13 +17,7 @@ from pathlib import Path
 import httpx
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import print_table, write_json
-
-
-def _port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+from common import create_token, free_port, print_table, service_env, wait_healthy, write_json
 
 
 def main() -> None:
@@ -34,26 +26,16 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=60.0)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="flybo-bench-") as tmp:
-        env = {k: v for k, v in os.environ.items() if not k.startswith("FLYBO_")}
-        env["FLYBO_DATA_DIR"] = tmp
-        if "FLYBO_CACHE_DIR" in os.environ:
-            env["FLYBO_CACHE_DIR"] = os.environ["FLYBO_CACHE_DIR"]
-        token = subprocess.run([sys.executable, "-m", "flybo", "tokens", "create", "--user",
-                                "bench"], env=env, check=True, capture_output=True,
-                               text=True).stdout.strip()
-        port = _port()
+        env = service_env(tmp)
+        token = create_token(env, "bench")
+        port = free_port()
         base = f"http://127.0.0.1:{port}"
         t0 = time.monotonic()
         with open(Path(tmp) / "serve.log", "wb") as log:
             proc = subprocess.Popen([sys.executable, "-m", "flybo", "serve", "--port", str(port)],
                                     env=env, stdout=log, stderr=subprocess.STDOUT)
         try:
-            while True:
-                try:
-                    if httpx.get(f"{base}/healthz", timeout=2).status_code == 200:
-                        break
-                except httpx.HTTPError:
-                    time.sleep(0.2)
+            wait_healthy(base)
             startup = time.monotonic() - t0
             t1 = time.monotonic()
             job = httpx.post(f"{base}/api/v1/jobs", headers={"Authorization": f"Bearer {token}"},

@@ -4,7 +4,6 @@ create user namespaces of its own; the seccomp filter refuses the system calls i
 from __future__ import annotations
 
 import ast
-import os
 import stat
 from dataclasses import replace
 from pathlib import Path
@@ -12,22 +11,12 @@ from pathlib import Path
 import pytest
 
 from sim.episode import run_episode
+from tests.sandbox.conftest import required
 from tests.sandbox.test_hostile import CONFIG, _planner
 from worker.sandbox import isolation
 from worker.sandbox.dry_run import tiny_area
 from worker.sandbox.isolation import MIN_BWRAP, SandboxLimits, _probe_bwrap, probe
 from worker.sandbox.proxy import SandboxedPlanner, SandboxError
-
-
-@pytest.fixture(scope="module")
-def isolated() -> None:
-    iso = probe()
-    if not iso.full:
-        message = f"full isolation is not available here: {'; '.join(iso.notes)}"
-        if os.environ.get("CI") == "true":
-            pytest.fail(message)
-        pytest.skip(message)
-
 
 # Writes 4 MiB files into each folder (below the file size limit) until a write fails, through
 # libc: the audit hook would refuse /dev/shm before the file system does.
@@ -121,10 +110,7 @@ raise RuntimeError(repr(found))
 
 def test_the_seccomp_filter_refuses_its_calls(tmp_path: Path, isolated: None) -> None:
     if not probe().seccomp:
-        message = f"no seccomp filter here: {'; '.join(probe().notes)}"
-        if os.environ.get("CI") == "true":
-            pytest.fail(message)
-        pytest.skip(message)
+        required(f"no seccomp filter here: {'; '.join(probe().notes)}")
     reason, _ = _fly_holding(tmp_path, _planner(FILTERED), SandboxLimits())
     found = ast.literal_eval(reason[reason.index("{"):reason.rindex("}") + 1])
     assert found == {"unshare": (-1, "Operation not permitted"),
