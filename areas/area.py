@@ -98,16 +98,32 @@ class Area:
 class GroundTruth:
     """What a perfect exploration of an area can observe.
 
+    "Reachable" and "observable" follow one rule, the planners' (`areas.observability`): the
+    vehicle's centre keeps the safety radius from every blocked voxel's cube.
+
     Attributes:
-        observable: (nx, ny, nz) bool on the area's occupancy grid: voxels reachable through free
-            space from the start, plus the surface layer those voxels touch.
+        observable: (nx, ny, nz) bool on the area's occupancy grid: the free voxels a camera on
+            the vehicle can see from where it can fly, plus the surface layer those voxels touch.
         surface_points: (N, 3) float32 dense samples of the perceivable surfaces, metres.
         voxel_size: edge of the ``observable`` voxels in metres.
+        free_volume_m3: free space 6-connected to the start, m³ (what a point could reach).
+        reachable_volume_m3: the part of it the vehicle's centre can reach, m³.
+        observable_free_m3: free space the camera can see from there, m³ (the free part of
+            ``observable``); ``free_volume_m3`` minus this is free space no run can observe,
+            behind openings narrower than the vehicle or out of the camera's reach.
     """
 
     observable: npt.NDArray[np.bool_]
     surface_points: npt.NDArray[np.float32]
     voxel_size: float
+    free_volume_m3: float = 0.0
+    reachable_volume_m3: float = 0.0
+    observable_free_m3: float = 0.0
+
+    @property
+    def unobservable_free_m3(self) -> float:
+        """Free space connected to the start that no run can observe, m³."""
+        return max(0.0, self.free_volume_m3 - self.observable_free_m3)
 
     @property
     def observable_volume_m3(self) -> float:

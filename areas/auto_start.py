@@ -1,13 +1,20 @@
 """The automatic start pose of an imported area, and what its free space says about the area.
 
 The blocked voxels of the ground truth (centres within half a voxel of the mesh) split the grid
-into 6-connected free components. The largest component that does not touch the outer faces of
-the grid (an inside) is chosen if it holds at least `INDOOR_MIN_FRACTION` of the largest
-component's volume and room for the vehicle; otherwise the largest component with room for the
-vehicle. In it the start is the voxel centre with the largest distance to the mesh and to the
-grid's faces, among those 1-2 m above the floor below them if any has at least `MIN_CLEARANCE`,
-else among all. Yaw 0. The component's volume and its distinct floor heights (levels) come with
-the start.
+into 6-connected free components. In each, the vehicle can reach the traversable voxels
+(`areas.observability`: its centre keeps the safety radius from every blocked cube) connected to
+its start. The largest component that does not touch the outer faces of the grid (an inside) is
+chosen if it holds at least `INDOOR_MIN_FRACTION` of the largest component's volume and room for
+the vehicle; otherwise the largest component with room for the vehicle. In it the start lies in
+the largest set of traversable voxels the vehicle can fly between, at the voxel centre with the
+largest distance to the mesh and to the grid's faces, among those 1-2 m above the floor below
+them and within `START_REACH` of the mesh (so the camera sees the structure from the first
+frame) where any are, else among all. Yaw 0. The component's volume, the vehicle's reachable
+volume and its distinct floor heights (levels) come with the start.
+
+A mesh whose openings are all narrower than the vehicle leaves it almost no reachable space:
+`choose_start` refuses it (`MIN_REACHABLE_M3`), saying so, rather than giving an area no run
+can explore.
 """
 
 from __future__ import annotations
@@ -23,10 +30,14 @@ from areas.area import Area, StartPose
 from areas.ground_truth import blocked_voxels
 from areas.mesh import FloatArray
 from areas.mesh_file import MeshImportError
+from areas.observability import ViewModel, traversable
 
 BoolArray = npt.NDArray[np.bool_]
 
-MIN_CLEARANCE = 0.5  # metres from the start to the mesh and to the grid's faces
+# The camera's range (5 m) less a metre: from the start, some structure is in view.
+START_REACH = 4.0
+# Less reachable space than this (m³) is no area to explore: about a 1.2 m cube.
+MIN_REACHABLE_M3 = 2.0
 PREFERRED_HEIGHT = (1.0, 2.0)  # metres above the floor below the start
 INDOOR_MIN_FRACTION = 0.25  # of the largest component's volume, for an inside to be chosen
 EXACT_CANDIDATES = 20_000  # voxels whose exact clearance is computed
@@ -40,6 +51,7 @@ class AutoStart:
 
     start: StartPose
     volume_m3: float
+    reachable_volume_m3: float
     levels: int
     indoor: bool
 
@@ -48,25 +60,22 @@ def choose_start(area: Area) -> AutoStart:
     """The automatic start pose and the statistics of its free component (the module docstring).
 
     Raises:
-        MeshImportError: when no free space has `MIN_CLEARANCE` for a start.
+        MeshImportError: when no free space has room for the vehicle, or the space it can reach
+            from any start is almost empty.
     """
     vs = area.voxel_size
     blocked = blocked_voxels(area)
-    free = ~blocked
     six = ndimage.generate_binary_structure(3, 1)
-    labels, count = ndimage.label(free, structure=six)
-    if count == 0:
-        raise MeshImportError(f"no free space with {MIN_CLEARANCE} m clearance")
+    labels, count = ndimage.label(~blocked, structure=six)
+    radius = ViewModel().safety_radius_m
+    walkable = traversable(blocked, vs, radius)
+    if count == 0 or not walkable.any():
+        raise MeshImportError(f"no free space has room for the vehicle ({radius:g} m from every "
+                              "surface): the mesh leaves no gap that wide")
     sizes = np.bincount(labels.ravel(), minlength=count + 1)
     sizes[0] = 0
-
-    # Clearance estimate: distance to the nearest blocked voxel centre or to the grid's faces.
-    padded = np.pad(free, 1, constant_values=False)
-    clearance = ndimage.distance_transform_edt(padded)[1:-1, 1:-1, 1:-1] * vs - 0.5 * vs
-    roomy = np.bincount(labels[clearance >= MIN_CLEARANCE], minlength=count + 1) > 0
+    roomy = np.bincount(labels[walkable], minlength=count + 1) > 0
     roomy[0] = False
-    if not roomy.any():
-        raise MeshImportError(f"no free space with {MIN_CLEARANCE} m clearance")
 
     faces = [labels[0], labels[-1], labels[:, 0], labels[:, -1], labels[:, :, 0], labels[:, :, -1]]
     touching = np.zeros(count + 1, dtype=bool)
@@ -75,18 +84,35 @@ def choose_start(area: Area) -> AutoStart:
     pool = inside if inside.any() else roomy
     chosen = int(np.argmax(np.where(pool, sizes, -1)))
     component = labels == chosen
+    del labels
 
+    reachable = _largest_component(walkable & component, six)
+    reachable_m3 = float(np.count_nonzero(reachable)) * vs**3
+    free_m3 = float(sizes[chosen]) * vs**3
+    if reachable_m3 < MIN_REACHABLE_M3:
+        raise MeshImportError(
+            f"the vehicle can reach only {reachable_m3:.2f} m³ of the {free_m3:.1f} m³ of free "
+            f"space: the mesh's openings are narrower than the vehicle needs ({2 * radius:g} m, "
+            f"its safety radius on both sides)")
     height = _height_above_floor(blocked) * vs
-    start_ijk = _best_voxel(area, component, clearance, height)
-    if start_ijk is None:
-        raise MeshImportError(f"no free space with {MIN_CLEARANCE} m clearance")
+    start_ijk = _best_voxel(area, blocked, reachable, height)
     position = area.bounds_min + (np.asarray(start_ijk, dtype=np.float64) + 0.5) * vs
     return AutoStart(
         start=StartPose(position=position, yaw=0.0),
-        volume_m3=float(sizes[chosen]) * vs**3,
+        volume_m3=free_m3,
+        reachable_volume_m3=reachable_m3,
         levels=_count_levels(component, blocked, vs),
         indoor=not bool(touching[chosen]),
     )
+
+
+def _largest_component(mask: BoolArray, structure: npt.NDArray[np.bool_]) -> BoolArray:
+    """The largest 6-connected component of a non-empty ``mask``."""
+    labels, count = ndimage.label(mask, structure=structure)
+    sizes = np.bincount(labels.ravel(), minlength=count + 1)
+    sizes[0] = 0
+    largest: BoolArray = labels == int(np.argmax(sizes))
+    return largest
 
 
 def _height_above_floor(blocked: BoolArray) -> FloatArray:
@@ -103,41 +129,44 @@ def _height_above_floor(blocked: BoolArray) -> FloatArray:
     return (k - below - 0.5).astype(np.float64)
 
 
-def _best_voxel(
-    area: Area, component: BoolArray, clearance: FloatArray, height: FloatArray
-) -> tuple[int, int, int] | None:
-    """Voxel of ``component`` with the largest exact clearance, preferring 1-2 m above a floor.
+def _best_voxel(area: Area, blocked: BoolArray, reachable: BoolArray,
+                height: FloatArray) -> tuple[int, int, int]:
+    """Voxel of the non-empty ``reachable`` with the largest exact clearance, preferring those
+    1-2 m above a floor and within `START_REACH` of the mesh.
 
-    The voxel estimate of the clearance preselects the `EXACT_CANDIDATES` most promising voxels;
-    the exact distance to the mesh and to the grid's faces decides among them.
+    ``height`` is in metres. The voxel estimate of the clearance (distance to the nearest blocked
+    voxel centre or grid face) preselects the `EXACT_CANDIDATES` most promising voxels within
+    reach; the exact distance to the mesh and to the grid's faces decides among them.
     """
     vs = area.voxel_size
-    candidates = np.argwhere(component & (clearance >= MIN_CLEARANCE - vs))
-    if len(candidates) == 0:
-        return None
-    h = height[tuple(candidates.T)] * vs
+    padded = np.pad(~blocked, 1, constant_values=False)
+    estimate = ndimage.distance_transform_edt(padded)[1:-1, 1:-1, 1:-1] * vs - 0.5 * vs
+    candidates = np.argwhere(reachable)
+    h = height[tuple(candidates.T)]
+    near = estimate[tuple(candidates.T)] <= START_REACH + vs
     preferred = (h >= PREFERRED_HEIGHT[0]) & (h <= PREFERRED_HEIGHT[1])
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(
         o3d.core.Tensor.from_numpy((area.vertices - area.bounds_min).astype(np.float32)),
         o3d.core.Tensor.from_numpy(np.ascontiguousarray(area.triangles, dtype=np.uint32)),
     )
-    for pool in (candidates[preferred], candidates):
+    for pool in (candidates[preferred & near], candidates[near], candidates):
         if len(pool) == 0:
             continue
-        pool_estimate = clearance[tuple(pool.T)]
+        pool_estimate = estimate[tuple(pool.T)]
         top = pool[np.argsort(-pool_estimate, kind="stable")[:EXACT_CANDIDATES]]
         centres = (top + 0.5) * vs  # grid frame
         to_mesh = scene.compute_distance(
             o3d.core.Tensor.from_numpy(centres.astype(np.float32))
         ).numpy().astype(np.float64)
         to_faces = np.minimum(centres, area.extent - centres).min(axis=1)
-        exact = np.minimum(to_mesh, to_faces)
-        best = int(np.argmax(exact))
-        if exact[best] >= MIN_CLEARANCE:
+        exact = np.where(to_mesh <= START_REACH, np.minimum(to_mesh, to_faces), -np.inf)
+        if np.isfinite(exact).any() or pool is candidates:
+            best = int(np.argmax(np.where(np.isfinite(exact), exact,
+                                          np.minimum(to_mesh, to_faces) - 1e9)))
             i, j, k = (int(v) for v in top[best])
             return i, j, k
-    return None
+    raise AssertionError("reachable is not empty")
 
 
 def _count_levels(component: BoolArray, blocked: BoolArray, vs: float) -> int:

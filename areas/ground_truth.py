@@ -11,13 +11,17 @@ Works for any triangle mesh, closed or not, with any winding:
    crossing point: the flood fill cannot pass through any surface, even a zero-thickness sheet.
    The ball of radius ``voxel_size / 2`` is inscribed in the voxel, so a blocked voxel always
    touches the surface and free space next to a wall is not eaten away by more than one layer.
-3. Reachable free space: 6-connected flood fill from the start voxel through unblocked voxels.
-4. Observable voxels: the reachable voxels plus the surface layer a depth camera sees: voxels
-   holding surface (blocked, or holding samples) that touch a reachable voxel by a face, edge or
-   corner. Face adjacency alone would drop the voxels along concave edges and corners of the free
-   space, whose surface a camera does see; the layer still never reaches past the blocked shell
-   behind a surface, so the far side of a wall at least one voxel thick stays out. Blocked voxels
-   count as holding surface so that the layer does not depend on where the random samples fall.
+3. Reachable and observable free space (`areas.observability`): the voxels the vehicle's centre
+   can reach from the start with the planners' clearance rule (the safety radius to every
+   blocked voxel's cube), and the free voxels a level camera of the benchmark's range and
+   vertical field of view sees from them.
+4. Observable voxels: the observable free voxels plus the surface layer a depth camera sees:
+   voxels holding surface (blocked, or holding samples) that touch an observable free voxel by a
+   face, edge or corner. Face adjacency alone would drop the voxels along concave edges and
+   corners of the free space, whose surface a camera does see; the layer still never reaches
+   past the blocked shell behind a surface, so the far side of a wall at least one voxel thick
+   stays out. Blocked voxels count as holding surface so that the layer does not depend on
+   where the random samples fall.
 5. Perceivable surface cloud: the samples lying in that surface layer.
 
 A sample on a voxel face belongs to both voxels sharing the face (it is looked up a tiny step to
@@ -45,6 +49,7 @@ from scipy import ndimage
 
 from areas.area import Area, GroundTruth
 from areas.cache import cache_dir
+from areas.observability import ViewModel, observability
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -52,7 +57,7 @@ BoolArray = npt.NDArray[np.bool_]
 
 DEFAULT_SAMPLE_SPACING = 0.02
 # Stored in each cache file; bump when the computation changes so stale files are recomputed.
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 # Triangles are sampled in chunks of about this many points, so that the large areas (tens of
 # millions of samples at 2 cm) never hold all float64 samples and their normals at once.
 SAMPLE_CHUNK_POINTS = 1 << 21
@@ -180,13 +185,14 @@ def blocked_voxels(area: Area) -> BoolArray:
 
 
 def compute_ground_truth(
-    area: Area, *, sample_spacing: float = DEFAULT_SAMPLE_SPACING
+    area: Area, *, sample_spacing: float = DEFAULT_SAMPLE_SPACING, view: ViewModel | None = None
 ) -> GroundTruth:
     """Observable voxels and perceivable surface samples of an area (see the module docstring).
 
     Args:
         area: the scene; its start position must lie in an unblocked voxel.
         sample_spacing: surface sampling spacing in metres (about one point per spacing**2).
+        view: the vehicle and camera; the benchmark's by default.
 
     Returns:
         The ground truth on the area's occupancy grid.
@@ -202,10 +208,14 @@ def compute_ground_truth(
     if not start_inside[0] or blocked[start]:
         raise ValueError(f"start {area.start.position} of area {area.name!r} is not in free space")
 
-    six = ndimage.generate_binary_structure(3, 1)
-    labels, _ = ndimage.label(~blocked, structure=six)
-    reachable = labels == labels[start]
-    del labels
+    seen = observability(blocked, (int(start[0]), int(start[1]), int(start[2])),
+                         area.voxel_size, view)
+    cell = area.voxel_size**3
+    volumes = {"free_volume_m3": float(np.count_nonzero(seen.free_component)) * cell,
+               "reachable_volume_m3": float(np.count_nonzero(seen.reachable)) * cell,
+               "observable_free_m3": float(np.count_nonzero(seen.observable_free)) * cell}
+    visible = seen.observable_free
+    del seen
 
     # Two passes over the same seeded samples: the first marks the voxels holding surface, the
     # second keeps the samples of the surface layer. Regenerating is cheaper than holding them.
@@ -220,20 +230,21 @@ def compute_ground_truth(
     # Edge and corner neighbours count too: the voxels along a concave edge or corner of the free
     # space touch no reachable voxel by a face, yet a camera sees their surface.
     twenty_six = ndimage.generate_binary_structure(3, 3)
-    near_reachable = ndimage.binary_dilation(reachable, structure=twenty_six).ravel()
-    layer = (has_surface | blocked.ravel()) & near_reachable
-    del has_surface, near_reachable
+    near_visible = ndimage.binary_dilation(visible, structure=twenty_six).ravel()
+    layer = (has_surface | blocked.ravel()) & near_visible
+    del has_surface, near_visible
     kept: list[npt.NDArray[np.float32]] = []
     for points, side_a, inside_a, side_b, inside_b in _sample_chunks(
         area, vertices, triangles, sample_spacing, seed
     ):
         perceivable = (inside_a & layer[side_a]) | (inside_b & layer[side_b])
         kept.append(points[perceivable])
-    observable = reachable | layer.reshape(area.grid_shape)
+    observable = visible | layer.reshape(area.grid_shape)
     return GroundTruth(
         observable=observable,
         surface_points=np.concatenate(kept) if kept else np.zeros((0, 3), dtype=np.float32),
         voxel_size=area.voxel_size,
+        **volumes,
     )
 
 
@@ -293,6 +304,8 @@ def _write_atomic(path: Path, truth: GroundTruth, content_hash: str) -> None:
                 "shape": np.array(truth.observable.shape, dtype=np.int64),
                 "observable": np.packbits(truth.observable.ravel()),
                 "voxel_size": np.float64(truth.voxel_size),
+                "volumes_m3": np.array([truth.free_volume_m3, truth.reachable_volume_m3,
+                                        truth.observable_free_m3]),
                 **_pack_points(truth.surface_points),
             }
             np.savez(f, **arrays)
@@ -342,10 +355,12 @@ def _read(path: Path, area: Area) -> GroundTruth | None:
             count = int(np.prod(area.grid_shape))
             bits = np.unpackbits(data["observable"], count=count).astype(bool)
             points = _unpack_points(data)
+            free, reachable, observable_free = (float(v) for v in data["volumes_m3"])
     except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):
         return None
     return GroundTruth(
-        observable=bits.reshape(area.grid_shape), surface_points=points, voxel_size=area.voxel_size
+        observable=bits.reshape(area.grid_shape), surface_points=points, voxel_size=area.voxel_size,
+        free_volume_m3=free, reachable_volume_m3=reachable, observable_free_m3=observable_free,
     )
 
 

@@ -13,13 +13,11 @@ Pipeline (`import_mesh`; steps 2 to 4 are `areas.mesh_file`'s, steps 6 and 7 use
 5. Bounds: the mesh's bounding box grown by one voxel plus `HORIZONTAL_MARGIN` on each horizontal
    side and by `TOP_MARGIN` above (not below: the floor is the bottom of the grid), snapped outward
    to whole voxels. World coordinates are kept as they are.
-6. Start pose (when not given): the blocked voxels of the ground truth (centres within half a voxel
-   of the mesh) split the grid into 6-connected free components. The largest component that does
-   not touch the outer faces of the grid (an inside) is chosen if it holds at least
-   `INDOOR_MIN_FRACTION` of the largest component's volume and room for the vehicle; otherwise the
-   largest component with room for the vehicle. In it the start is the voxel centre with the largest
-   distance to the mesh and to the grid's faces, among those 1-2 m above the floor below them if any
-   has at least `MIN_CLEARANCE`, else among all. Yaw 0.
+6. Start pose (when not given, `areas.auto_start`): in the largest inside free component (or the
+   largest component) with room for the vehicle, the traversable voxel the vehicle can reach
+   (the planners' clearance rule) with the most clearance, 1-2 m above a floor and within 4 m of
+   the mesh where possible. A mesh whose openings are all narrower than the vehicle is refused,
+   with the reachable volume and the reason. Yaw 0.
 7. Plateau time (when not given): ``clamp(0.8 s/m³ × volume of the chosen component, 300, 1800)``
    seconds, the free volume a perfect exploration could fly through.
 """
@@ -37,8 +35,9 @@ from areas.area import Area, AreaInfo, StartPose
 from areas.auto_start import (
     EXACT_CANDIDATES,
     INDOOR_MIN_FRACTION,
-    MIN_CLEARANCE,
+    MIN_REACHABLE_M3,
     PREFERRED_HEIGHT,
+    START_REACH,
     STOREY_MIN_FRACTION,
     STOREY_MIN_GAP,
     choose_start,
@@ -55,11 +54,12 @@ __all__ = [
     "EXACT_CANDIDATES",
     "HORIZONTAL_MARGIN",
     "INDOOR_MIN_FRACTION",
-    "MIN_CLEARANCE",
+    "MIN_REACHABLE_M3",
     "NAME_PATTERN",
     "PLATEAU_RANGE",
     "PLATEAU_S_PER_M3",
     "PREFERRED_HEIGHT",
+    "START_REACH",
     "STOREY_MIN_FRACTION",
     "STOREY_MIN_GAP",
     "SUPPORTED_EXTENSIONS",

@@ -24,6 +24,7 @@ from scipy import ndimage
 
 from areas.area import Area, GroundTruth
 from areas.ground_truth import blocked_voxels, sample_surface
+from areas.observability import ViewModel, traversable
 
 BoolArray = npt.NDArray[np.bool_]
 
@@ -33,7 +34,6 @@ BIN = 0.1
 BIN_FRACTION = 0.02
 LEVEL_FRACTION = 0.25
 GROUP_GAP = 0.35
-VEHICLE_RADIUS = 0.3
 
 
 @dataclass(frozen=True)
@@ -103,21 +103,16 @@ def mesh_extent(area: Area) -> tuple[float, float, float]:
     return float(size[0]), float(size[1]), float(size[2])
 
 
-def flyable_voxels(area: Area, radius: float = VEHICLE_RADIUS) -> BoolArray:
-    """(nx, ny, nz) bool: voxels a sphere of ``radius`` can reach from the start.
-
-    A voxel is open when its centre lies at least ``radius + voxel_size / 2`` from every blocked
-    voxel centre (a blocked voxel's centre is within half a voxel of the mesh); the flyable
-    voxels are the open ones 6-connected to the start's voxel.
-    """
+def flyable_voxels(area: Area) -> BoolArray:
+    """(nx, ny, nz) bool: voxels the vehicle's centre can reach from the start, by the planners'
+    clearance rule (`areas.observability`: the safety radius to every blocked voxel's cube)."""
     blocked = blocked_voxels(area)
-    distance = ndimage.distance_transform_edt(~blocked) * area.voxel_size
-    open_ = distance >= radius + area.voxel_size / 2.0
-    start = tuple(np.floor((area.start.position - area.bounds_min) / area.voxel_size)
-                  .astype(int))
-    if not open_[start]:
-        return np.zeros_like(open_)
-    labels, _ = ndimage.label(open_, structure=ndimage.generate_binary_structure(3, 1))
+    start = tuple(int(v) for v in np.floor((area.start.position - area.bounds_min)
+                                           / area.voxel_size).astype(int))
+    walkable = traversable(blocked, area.voxel_size, ViewModel().safety_radius_m)
+    if not walkable[start]:
+        return np.zeros_like(walkable)
+    labels, _ = ndimage.label(walkable, structure=ndimage.generate_binary_structure(3, 1))
     return np.asarray(labels == labels[start])
 
 

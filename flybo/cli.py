@@ -158,6 +158,22 @@ def _import_area(args: argparse.Namespace) -> None:
     print(f"imported {area.name}: {len(area.triangles)} faces, {size} m, "
           f"observable volume {truth.observable_volume_m3:.1f} m³, "
           f"start {_rounded(area.start.position)}, plateau {area.plateau_s:g} s")
+    print(f"  {_reach_note(truth)}")
+
+
+def _reach_note(truth: GroundTruth) -> str:
+    """What of the free space around the start the vehicle can fly through and see."""
+    from areas.observability import ViewModel  # the simulation stack: on use
+
+    note = (f"free space from the start {truth.free_volume_m3:.1f} m³, the vehicle reaches "
+            f"{truth.reachable_volume_m3:.1f} m³ and sees {truth.observable_free_m3:.1f} m³")
+    hidden = truth.unobservable_free_m3
+    if hidden >= max(0.5, 0.005 * truth.free_volume_m3):
+        width = 2 * ViewModel().safety_radius_m
+        note += (f"; {hidden:.1f} m³ ({100 * hidden / truth.free_volume_m3:.1f} %) is out of "
+                 f"reach and sight: behind openings narrower than the vehicle needs "
+                 f"({width:g} m) or beyond the camera's range")
+    return note
 
 
 def _rounded(position: Any) -> list[float]:
@@ -204,10 +220,12 @@ def _show_area(name: str) -> None:
         ("start", f"{_rounded(area.start.position)}, yaw {area.start.yaw:.2f}",
          None),
     ]
+    truth = load_ground_truth(area)
     print(f"{area.info.title} ({area.name})")
     print(f"  {'':<20} {'measured':<34} {'Table 1' if paper else ''}")
     for label, measured, table in rows:
         print(f"  {label:<20} {measured:<34} {table or ''}".rstrip())
+    print(f"  {_reach_note(truth)}")
 
 
 def _build_areas(name: str) -> None:

@@ -50,7 +50,7 @@ def _check_real(area: Area, expected: tuple[float, float, float]) -> None:
     assert area.bounds_min[2] == pytest.approx(
         np.floor(area.vertices[:, 2].min() / area.voxel_size) * area.voxel_size
     )
-    assert _clearance(area, area.start.position) >= 0.5
+    assert _clearance(area, area.start.position) >= 0.45
     assert np.all(area.start.position > area.bounds_min + 0.5)
     assert np.all(area.start.position < area.bounds_max - 0.5)
     assert 300.0 <= area.plateau_s <= 1800.0
@@ -97,7 +97,7 @@ def test_box_in_each_format(tmp_path: Path, ext: str) -> None:
     # The inside of the closed box is chosen: 1 m from the side walls at x = +-1.
     assert area.info.indoor
     assert abs(area.start.position[0]) == pytest.approx(0.05)  # a voxel centre nearest x = 0
-    assert _clearance(area, area.start.position) >= 0.5
+    assert _clearance(area, area.start.position) >= 0.45
     assert area.info.levels == 1
     assert area.plateau_s == 300.0  # about 24 m³ of free space: the lower clamp
     np.testing.assert_allclose(area.bounds_min, [-1.6, -2.1, -2.0], atol=1e-9)
@@ -223,5 +223,30 @@ def test_bad_name(tmp_path: Path, name: str) -> None:
 def test_no_room_for_a_start(tmp_path: Path) -> None:
     path = tmp_path / "small.obj"
     _box((0.5, 0.5, 0.5)).export(path)
-    with pytest.raises(MeshImportError, match=r"no free space with 0\.5 m clearance"):
+    with pytest.raises(MeshImportError, match=r"no free space has room for the vehicle"):
         import_mesh(path, "small")
+
+
+def test_a_mesh_with_no_gap_the_vehicle_fits_is_refused_saying_why(tmp_path: Path) -> None:
+    """A closed crawl space 0.8 m high: 28 m³ of free space, none of it 0.9 m across."""
+    path = tmp_path / "crawl.obj"
+    _box((6.0, 6.0, 0.8)).export(path)
+    with pytest.raises(MeshImportError, match=r"no free space has room for the vehicle \(0\.45 m"):
+        import_mesh(path, "crawl")
+
+
+def test_the_start_sees_structure_and_the_vehicle_can_fly_from_it(tmp_path: Path) -> None:
+    """A closed 30 x 30 x 12 m hall: the start is within camera reach of a surface, 1-2 m above
+    the floor, and traversable by the planners' rule."""
+    from areas.ground_truth import blocked_voxels
+    from areas.observability import ViewModel, traversable
+
+    path = tmp_path / "hall.obj"
+    _box((30.0, 30.0, 12.0)).export(path)
+    area = import_mesh(path, "hall", voxel_size=0.2)
+    assert _clearance(area, area.start.position) <= 4.0
+    # 1-2 m above the top of the floor's blocked voxels, at most a voxel above the floor itself.
+    assert 1.0 <= area.start.position[2] - (-6.0) <= 2.0 + area.voxel_size
+    ijk = tuple(((area.start.position - area.bounds_min) / area.voxel_size).astype(int))
+    walkable = traversable(blocked_voxels(area), area.voxel_size, ViewModel().safety_radius_m)
+    assert walkable[ijk]

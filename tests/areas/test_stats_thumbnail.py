@@ -53,7 +53,7 @@ def test_levels_need_an_opening() -> None:
 
 def test_a_gap_too_small_for_the_vehicle_is_not_flyable() -> None:
     area = _two_storeys(hole=True)
-    # The same building with a 0.5 m hole: the flood fill passes, the 0.3 m sphere does not.
+    # The same building with a 0.5 m hole: the flood fill passes, the vehicle does not.
     p = Parts()
     p.add(slab((0, 0, 6, 4), 0.0, 0.15), slab((0, 0, 6, 4), 5.85, 6.0))
     p.add(slab((0, 0, 6, 4), 2.9, 3.1, [(4.0, 1.5, 4.5, 2.0)]))
@@ -64,8 +64,14 @@ def test_a_gap_too_small_for_the_vehicle_is_not_flyable() -> None:
         start=(2.0, 2.0, 1.3), yaw=0.0, plateau_s=10.0, voxel_size=0.1, info=area.info,
         generator_version=1, seed=0,
     )
-    assert measure(narrow, compute_ground_truth(narrow, sample_spacing=0.1)).levels == 2
+    # The upper storey is free space the vehicle can neither reach nor see (a level camera
+    # looks through the hole at no more than 36.85 degrees): one level, and the ground truth
+    # says how much lies out of reach.
+    truth = compute_ground_truth(narrow, sample_spacing=0.1)
+    assert measure(narrow, truth).levels == 1
     assert len(level_heights(narrow, flyable_voxels(narrow))) == 1
+    # The storeys are alike: about half the free space is the upper one.
+    assert truth.unobservable_free_m3 == pytest.approx(0.5 * truth.free_volume_m3, rel=0.1)
 
 
 def test_face_order() -> None:
