@@ -187,6 +187,8 @@ class Job(Base):
     created_at: Mapped[datetime] = mapped_column(_TS, default=utcnow, index=True)
     group_id: Mapped[int | None] = mapped_column(ForeignKey("job_groups.id"), nullable=True,
                                                  index=True)
+    # Loaded from a baseline dataset (`server.baselines`), not flown by this service.
+    reference: Mapped[bool] = mapped_column(Boolean, default=False)
 
     planner: Mapped[PlannerRow] = relationship()
     user: Mapped[User] = relationship()
