@@ -1,5 +1,4 @@
-"""`flybo baselines export | import | verify`, and the load of the shipped dataset at a
-service's first start (`docs/baselines.md`).
+"""`flybo baselines export | import | verify` (`docs/baselines.md`).
 
 Export and import work on the service's database (the `FLYBO_*` settings, as `flybo tokens`);
 verify re-flies sampled cells of a dataset on this machine (`flybo.baselines_verify`).
@@ -8,19 +7,11 @@ verify re-flies sampled cells of a dataset on this machine (`flybo.baselines_ver
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+from flybo.baselines_load import SHIPPED_DATASET, current_benchmark_version, load_file
 from flybo.errors import CliError
-
-if TYPE_CHECKING:
-    from sqlalchemy.orm import Session, sessionmaker
-
-    from server.baselines import Imported
-
-# The dataset this repository ships: `flybo serve` loads it into an empty database.
-SHIPPED_DATASET = Path(__file__).resolve().parent / "baselines.json.xz"
 
 
 def add_baselines_command(sub: Any) -> None:
@@ -55,13 +46,7 @@ def run_baselines(args: argparse.Namespace) -> None:
     else:
         from flybo.baselines_verify import verify  # the simulation and the worker: on use
 
-        verify(args.file, args.sample, args.seed, args.preset)
-
-
-def current_benchmark_version() -> str:
-    from flybo.versions import benchmark_version  # hashes the tree: on use
-
-    return benchmark_version()
+        verify(args.file, args.sample, args.seed, args.preset, current_benchmark_version())
 
 
 def _export(args: argparse.Namespace) -> None:
@@ -88,25 +73,6 @@ def _export(args: argparse.Namespace) -> None:
           f"({size / max(suite.runs, 1) / 1024:.2f} KiB per run)")
 
 
-def load_file(factory: sessionmaker[Session], path: Path, benchmark_version: str, *,
-              only_if_empty: bool = False) -> Imported | None:
-    """Import the dataset at `path` in one transaction; with `only_if_empty`, only into a
-    database without jobs (None otherwise). Raises `DatasetError`."""
-    from server.baseline_format import DatasetError, decode
-    from server.baselines import database_is_empty, fingerprint, import_dataset
-    from server.db import session_scope
-
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise DatasetError(f"cannot read {path}: {exc.strerror or exc}") from None
-    dataset = decode(data, benchmark_version=benchmark_version)
-    with session_scope(factory) as session:
-        if only_if_empty and not database_is_empty(session):
-            return None
-        return import_dataset(session, dataset, fingerprint(data))
-
-
 def _import(path: Path) -> None:
     from flybo.local_commands import cli_settings, migrated
     from server.baseline_format import DatasetError
@@ -119,21 +85,3 @@ def _import(path: Path) -> None:
     assert done is not None
     print(f"{path}: {done.imported} reference run(s) of benchmark version "
           f"{done.benchmark_version} imported, {done.skipped} already there")
-
-
-def load_shipped_baselines(factory: sessionmaker[Session],
-                           path: Path = SHIPPED_DATASET) -> None:
-    """`flybo serve`'s first start: the shipped dataset into an empty database. A dataset of
-    another benchmark version is reported and left out; the service starts either way."""
-    if not path.is_file():
-        return
-    from server.baseline_format import DatasetError
-
-    try:
-        done = load_file(factory, path, current_benchmark_version(), only_if_empty=True)
-    except DatasetError as exc:
-        print(f"flybo: the shipped baselines were not loaded: {exc}", file=sys.stderr)
-        return
-    if done is not None:
-        print(f"loaded {done.imported} reference run(s) of benchmark version "
-              f"{done.benchmark_version} from {path.name}", flush=True)

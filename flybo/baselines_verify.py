@@ -144,12 +144,12 @@ def refly(run: RunEntry, folder: Path) -> tuple[ResultEntry, SeriesEntry | None]
     return flown
 
 
-def verify(path: Path, sample: int, seed: int, presets: Sequence[str] | None = None) -> None:
-    from flybo.baselines_commands import current_benchmark_version
-
+def verify(path: Path, sample: int, seed: int, presets: Sequence[str] | None,
+           version: str) -> None:
+    """Re-fly `sample` cells of the dataset at `path`, which must be of benchmark version
+    `version` (this code's); raises `CliError` unless every cell agrees."""
     if sample < 1:
         raise CliError("--sample must be at least 1")
-    version = current_benchmark_version()
     try:
         dataset = read_dataset(path, benchmark_version=version)
     except DatasetError as exc:

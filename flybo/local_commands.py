@@ -107,7 +107,7 @@ def run_serve(args: argparse.Namespace) -> None:
     import uvicorn  # the whole service (API, pages, sandbox): only when serving
 
     from flybo.app import create_app
-    from flybo.baselines_commands import load_shipped_baselines
+    from flybo.baselines_load import load_shipped_baselines
     from flybo.worker_processes import start_workers, stop_workers
     from server.app import MAX_CONCURRENT_REQUESTS
     from worker.threads import ThreadSettingError

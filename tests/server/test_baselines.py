@@ -17,7 +17,7 @@ import pytest
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
-from flybo.baselines_commands import load_file, load_shipped_baselines
+from flybo.baselines_load import load_file, load_shipped_baselines
 from flybo.cli import main
 from server.baseline_format import (
     FORMAT_VERSION,

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 from sqlalchemy import select
 
-from flybo.baselines_commands import load_file
+from flybo.baselines_load import load_file
 from flybo.cli import main
 from server.baseline_format import read_dataset
 from server.catalog import sync_builtin_planners
