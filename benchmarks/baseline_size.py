@@ -1,0 +1,115 @@
+"""The size of a baseline dataset per run, and the full suite's estimated from it.
+
+A dataset's size is a part per run (result, metrics, reproducibility record) and a part per
+simulated second (the series: explored volume each second, recall every 20 s). Both are
+measured on a real dataset: the file as written, and the same runs written without their
+series. The full suite (7 planners x 11 areas x 5 runs at the plateau times: 385 runs,
+393,750 simulated seconds) is then 385 x the per-run part + 393,750 x the per-second part,
+against the budget of 20 MiB (`docs/baselines.md`).
+
+    python benchmarks/baseline_size.py --dataset FILE      # a dataset exported earlier
+    python benchmarks/baseline_size.py --runs 2 --seconds 60   # fly a small suite first
+
+Without `--dataset` it flies `--planners` x `--areas` x `--runs` of `--seconds` in the
+`--preset` preset with the worker's own `execute_run` into a scratch SQLite service, then
+exports it as `flybo baselines export` does.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+from server.baseline_format import Dataset, encode, read_dataset
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import print_table, write_json
+
+FULL_RUNS = 7 * 11 * 5
+FULL_SIMULATED_S = 5 * 7 * (700 + 600 + 750 + 1650 + 700 + 750 + 1650 + 900 + 550 + 1200 + 1800)
+BUDGET_BYTES = 20 * 1024 * 1024
+
+
+def fly_suite(folder: Path, planners: list[str], areas: list[str], runs: int, seconds: float,
+              preset: str) -> Dataset:
+    from flybo.record import reproducibility_record
+    from flybo.versions import benchmark_version
+    from server.baselines import export_dataset
+    from server.catalog import sync_builtin_planners
+    from server.db import make_engine, make_session_factory, session_scope
+    from server.jobs import create_job
+    from server.migrate import upgrade
+    from server.models import User
+    from server.schemas import JobCreate
+    from server.settings import Settings
+    from worker.runner import execute_run, install_record_builder
+
+    install_record_builder(reproducibility_record)
+    settings = Settings(data_dir=folder / "data",
+                        database_url=f"sqlite:///{folder / 'flybo.sqlite'}")
+    engine = make_engine(settings.db_url)
+    upgrade(engine)
+    factory = make_session_factory(engine)
+    ids: list[int] = []
+    with session_scope(factory) as s:
+        sync_builtin_planners(s)
+        user = User(name="benchmark")
+        s.add(user)
+        s.flush()
+        for planner in planners:
+            created = create_job(s, settings, user, JobCreate(
+                planner=planner, areas=areas, runs=runs, seconds=seconds, preset=preset))
+            ids += [run_id for run_id, _ in created.runs]
+    for run_id in ids:
+        print(f"run {run_id}: {execute_run(run_id, settings)}", flush=True)
+    with factory() as s:
+        dataset = export_dataset(s, benchmark_version())
+    engine.dispose()
+    return dataset
+
+
+def measure(dataset: Dataset) -> dict[str, float]:
+    whole = len(encode(dataset))
+    bare = len(encode(dataset.model_copy(update={
+        "runs": [r.model_copy(update={"series": None}) for r in dataset.runs]})))
+    runs, simulated = len(dataset.runs), dataset.suite.simulated_s
+    per_run, per_second = bare / runs, (whole - bare) / simulated
+    estimate = FULL_RUNS * per_run + FULL_SIMULATED_S * per_second
+    return {"runs": runs, "simulated_s": simulated, "bytes": whole, "bytes_without_series": bare,
+            "per_run_bytes": per_run, "series_bytes_per_simulated_s": per_second,
+            "full_suite_runs": FULL_RUNS, "full_suite_simulated_s": FULL_SIMULATED_S,
+            "full_suite_estimate_bytes": estimate, "budget_bytes": BUDGET_BYTES,
+            "within_budget": estimate <= BUDGET_BYTES}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--dataset", type=Path, default=None)
+    parser.add_argument("--planners", nargs="+", default=["classic", "rapid"])
+    parser.add_argument("--areas", nargs="+", default=["maze", "facility-a"])
+    parser.add_argument("--runs", type=int, default=2)
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--preset", default="default")
+    args = parser.parse_args()
+    if args.dataset is not None:
+        dataset = read_dataset(args.dataset)
+    else:
+        with tempfile.TemporaryDirectory(prefix="flybo-baseline-size-") as tmp:
+            dataset = fly_suite(Path(tmp), args.planners, args.areas, args.runs,
+                                args.seconds, args.preset)
+    m = measure(dataset)
+    mib = 1024 * 1024
+    print_table("Baseline dataset size (xz-compressed JSON)", ["quantity", "value"], [
+        ["runs measured", m["runs"]], ["simulated s measured", f"{m['simulated_s']:,.0f}"],
+        ["file", f"{m['bytes'] / 1024:.1f} KiB"],
+        ["per run (result, metrics, record)", f"{m['per_run_bytes'] / 1024:.2f} KiB"],
+        ["series per simulated s", f"{m['series_bytes_per_simulated_s']:.2f} B"],
+        ["full suite (385 runs, 393,750 s)", f"{m['full_suite_estimate_bytes'] / mib:.2f} MiB"],
+        ["budget", f"{BUDGET_BYTES / mib:.0f} MiB"]])
+    write_json("baseline_size", m)
+
+
+if __name__ == "__main__":
+    main()
