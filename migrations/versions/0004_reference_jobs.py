@@ -20,16 +20,12 @@ depends_on: str | Sequence[str] | None = None
 
 
 def upgrade() -> None:
-    # The server default fills the rows already there; the model sets the value of new rows,
-    # so it goes again (batch mode: SQLite cannot drop a column default in place).
-    with op.batch_alter_table("jobs", schema=None) as batch_op:
-        batch_op.add_column(sa.Column("reference", sa.Boolean(), nullable=False,
-                                      server_default=sa.false()))
-    with op.batch_alter_table("jobs", schema=None) as batch_op:
-        batch_op.alter_column("reference", existing_type=sa.Boolean(), existing_nullable=False,
-                              server_default=None)
+    # A plain ADD COLUMN, not batch mode: SQLite would rebuild `jobs`, whose rows `runs`
+    # references. The default stays (the model declares it too): it fills the rows already
+    # there, and SQLite cannot drop a default without that rebuild.
+    op.add_column("jobs", sa.Column("reference", sa.Boolean(), nullable=False,
+                                    server_default=sa.text("false")))
 
 
 def downgrade() -> None:
-    with op.batch_alter_table("jobs", schema=None) as batch_op:
-        batch_op.drop_column("reference")
+    op.drop_column("jobs", "reference")  # SQLite 3.35 and later drop a column in place
