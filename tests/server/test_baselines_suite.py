@@ -73,7 +73,8 @@ def test_the_dataset_holds_the_whole_suite(suite: tuple[Settings, Path]) -> None
     _, path = suite
     dataset = read_dataset(path, benchmark_version=current_version())
     assert dataset.suite.runs == len(PLANNERS) * len(AREAS) * RUNS * len(PRESETS)
-    assert dataset.suite.simulated_s == pytest.approx(dataset.suite.runs * SECONDS, rel=1e-6)
+    # Each run ends on the first physics step at or past its length.
+    assert dataset.suite.simulated_s == pytest.approx(dataset.suite.runs * SECONDS, abs=0.1)
     assert dataset.suite.wall_time_s is not None and dataset.suite.wall_time_s > 0
     assert all(r.series is not None and r.result.record for r in dataset.runs)
     raw = json.loads(lzma.decompress(path.read_bytes()))
