@@ -30,7 +30,7 @@ from server.baseline_format import (
 )
 from server.baselines import REFERENCE_USER, export_dataset
 from server.db import make_engine, make_session_factory, session_scope
-from server.jobs import job_out
+from server.jobs import job_out, read_job
 from server.leaderboard import compute_leaderboard
 from server.migrate import upgrade
 from server.models import AreaRow, Base, Job, MetricSeries, Run, User
@@ -131,6 +131,8 @@ def test_import_gives_the_same_leaderboard_as_reference_results(
         jobs = s.scalars(select(Job)).all()
         assert jobs and all(j.reference and j.user.name == REFERENCE_USER for j in jobs)
         assert all(job_out(j).reference for j in jobs)
+        polled = read_job(s.connection(), jobs[0].id)  # what GET /api/v1/jobs/{id} answers
+        assert polled is not None and polled.reference
         series = s.scalars(select(MetricSeries)).all()
     with source() as s:
         stored = {bytes(m.explored_volume_m3) for m in s.scalars(select(MetricSeries))}
