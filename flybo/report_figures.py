@@ -125,8 +125,8 @@ def pareto_figure(data: ReportData) -> Figure:
     ax.invert_xaxis()
     ax.invert_yaxis()
     ax.grid(alpha=0.3)
-    ax.set_title(f"Figure 6: coverage rank vs F-score rank, 95 % intervals (preset "
-                 f"{data.preset})")
+    ax.set_title(f"Figure 6: coverage rank vs F-score rank (preset {data.preset})\n"
+                 "bars: 95 % intervals of the mean ranks", fontsize=10)
     return fig
 
 
