@@ -107,6 +107,7 @@ def run_serve(args: argparse.Namespace) -> None:
     import uvicorn  # the whole service (API, pages, sandbox): only when serving
 
     from flybo.app import create_app
+    from flybo.baselines_load import load_shipped_baselines
     from flybo.worker_processes import start_workers, stop_workers
     from server.app import MAX_CONCURRENT_REQUESTS
     from worker.threads import ThreadSettingError
@@ -115,6 +116,7 @@ def run_serve(args: argparse.Namespace) -> None:
         raise CliError(f"--port must be 1-65535, got {args.port}")
     settings = cli_settings()
     factory = migrated(settings)
+    load_shipped_baselines(factory)
     try:
         workers = start_workers(args.workers, args.threads_per_worker)
     except ThreadSettingError as exc:

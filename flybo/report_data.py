@@ -9,6 +9,7 @@ from typing import Any
 
 import httpx
 
+from server.baseline_format import SuiteEntry
 from server.schemas import AreaOut, Curves, Leaderboard
 
 CURVE_POINTS = 1000  # per curve: plenty for a printed figure, small to fetch
@@ -28,6 +29,10 @@ class ReportData:
     areas: list[AreaOut]
     curves: dict[str, Curves] = field(default_factory=dict)
     source: str = ""
+    # A report of a baseline dataset: what its whole suite took (`docs/baselines.md`), and how
+    # many of its runs are of the reported preset.
+    suite: SuiteEntry | None = None
+    suite_runs: int | None = None
 
     @property
     def benchmark_version(self) -> str:

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from flybo.report_data import ReportData
-from server.schemas import Band, Leaderboard, LeaderboardPlanner
+from server.schemas import Band, Interval, Leaderboard, LeaderboardPlanner
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -86,9 +86,16 @@ def curves_figure(data: ReportData, which: str) -> Figure:
     return fig
 
 
+def _error(value: float, interval: Interval | None) -> list[list[float]] | None:
+    """Matplotlib's error bar lengths below and above `value` for its interval."""
+    if interval is None:
+        return None
+    return [[max(0.0, value - interval.low)], [max(0.0, interval.high - value)]]
+
+
 def pareto_figure(data: ReportData) -> Figure:
-    """Figure 6: mean coverage rank against mean F-score rank (1 is best), the Pareto set
-    circled and joined."""
+    """Figure 6: mean coverage rank against mean F-score rank (1 is best), each with its 95 %
+    interval as error bars, the Pareto set circled and joined."""
     fig = _figure(5.5, 4.6)
     ax = fig.subplots()
     colours = _colours(data.board)
@@ -96,6 +103,10 @@ def pareto_figure(data: ReportData) -> Figure:
                                         if p.mean_fscore_rank is not None]
     for p in ranked:
         assert p.mean_fscore_rank is not None
+        ax.errorbar([p.mean_coverage_rank], [p.mean_fscore_rank],
+                    xerr=_error(p.mean_coverage_rank, p.mean_coverage_rank_ci),
+                    yerr=_error(p.mean_fscore_rank, p.mean_fscore_rank_ci),
+                    color=colours[p.planner], linewidth=1, capsize=3, zorder=2.5)
         ax.scatter([p.mean_coverage_rank], [p.mean_fscore_rank], color=colours[p.planner],
                    s=50, zorder=3, label=p.planner)
         ax.annotate(p.planner, (p.mean_coverage_rank, p.mean_fscore_rank),
@@ -114,7 +125,8 @@ def pareto_figure(data: ReportData) -> Figure:
     ax.invert_xaxis()
     ax.invert_yaxis()
     ax.grid(alpha=0.3)
-    ax.set_title(f"Figure 6: coverage rank vs F-score rank (preset {data.preset})")
+    ax.set_title(f"Figure 6: coverage rank vs F-score rank (preset {data.preset})\n"
+                 "bars: 95 % intervals of the mean ranks", fontsize=10)
     return fig
 
 

@@ -1,9 +1,11 @@
 """The tables of `flybo report`: the paper's Tables 1-4, as CSV and as Markdown.
 
 Tables show what the website shows: per planner and area the mean over the succeeded runs with
-the smallest and largest run; coverage and F-score in %, RMSE in cm; and each leaderboard metric
-of the measures that the paper's columns do not show (`Leaderboard.metrics`, such as the time to
-90 % coverage), in its own unit.
+its bootstrap 95 % interval and the smallest and largest run; coverage and F-score in %, RMSE in
+cm; and each leaderboard metric of the measures that the paper's columns do not show
+(`Leaderboard.metrics`, such as the time to 90 % coverage), in its own unit. Ranks are shared
+by tie groups (`docs/statistics.md`). The CSVs hold every number; the Markdown of the wide
+Tables 2 and 3 leaves the smallest and largest run to the CSV and Table 4.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from flybo.report_data import ReportData
-from server.schemas import AreaOut, Leaderboard, LeaderboardEntry, MetricOut, Spread
+from server.schemas import AreaOut, Interval, Leaderboard, LeaderboardEntry, MetricOut, Spread
 
 Cell = str | int | float | None
 DASH = "–"
@@ -53,22 +55,50 @@ def _scaled(value: float | None, scale: float = 1.0) -> float | None:
 
 
 def _spread_cells(s: Spread, scale: float = 1.0) -> list[Cell]:
-    return [_scaled(s.mean, scale), _scaled(s.min, scale), _scaled(s.max, scale)]
+    return [_scaled(s.mean, scale), _scaled(s.min, scale), _scaled(s.max, scale),
+            _scaled(s.ci_low, scale), _scaled(s.ci_high, scale)]
+
+
+def _interval_cells(i: Interval | None, scale: float = 1.0) -> list[Cell]:
+    return [None, None] if i is None else [_scaled(i.low, scale), _scaled(i.high, scale)]
 
 
 def _fmt(value: float | None, digits: int, scale: float = 1.0) -> str:
     return DASH if value is None else f"{value * scale:.{digits}f}"
 
 
-def _spread_text(s: Spread, digits: int, scale: float = 1.0) -> str:
-    if s.mean is None:
+def _ci_text(mean: float | None, low: float | None, high: float | None, digits: int,
+             scale: float = 1.0) -> str:
+    """The mean and its 95 % interval: "70.0 [65.1, 75.0]"."""
+    if mean is None:
         return DASH
-    return (f"{_fmt(s.mean, digits, scale)} ({_fmt(s.min, digits, scale)}{DASH}"
-            f"{_fmt(s.max, digits, scale)})")
+    if low is None or high is None:
+        return _fmt(mean, digits, scale)
+    return (f"{_fmt(mean, digits, scale)} [{_fmt(low, digits, scale)}, "
+            f"{_fmt(high, digits, scale)}]")
+
+
+def _mean_text(value: float | None, i: Interval | None, digits: int,
+               scale: float = 1.0) -> str:
+    return _ci_text(value, None if i is None else i.low, None if i is None else i.high, digits,
+                    scale)
+
+
+def _spread_text(s: Spread, digits: int, scale: float = 1.0, *, extremes: bool = True) -> str:
+    """"mean [interval] (min–max)", or without the extremes."""
+    text = _ci_text(s.mean, s.ci_low, s.ci_high, digits, scale)
+    if s.mean is None or not extremes:
+        return text
+    return f"{text} ({_fmt(s.min, digits, scale)}{DASH}{_fmt(s.max, digits, scale)})"
 
 
 def _spread_header(label: str) -> list[str]:
-    return [f"{label} mean", f"{label} min", f"{label} max"]
+    return [f"{label} mean", f"{label} min", f"{label} max", f"{label} ci low",
+            f"{label} ci high"]
+
+
+def _interval_header(label: str) -> list[str]:
+    return [label, f"{label} ci low", f"{label} ci high"]
 
 
 def table1(areas: Sequence[AreaOut]) -> Table:
@@ -114,8 +144,9 @@ def table2(board: Leaderboard) -> Table:
     for area in board.areas:
         header += _spread_header(f"{area} coverage %")
         md_header.append(area)
-    header += ["average coverage %", "relative coverage %", "mean coverage rank",
-               "mean F-score rank", "pareto"]
+    header += [*_interval_header("average coverage %"),
+               *_interval_header("relative coverage %"), *_interval_header("mean coverage rank"),
+               *_interval_header("mean F-score rank"), "pareto"]
     md_header += ["Average", "Relative", "Avg. rank"]
     extra = extra_metrics(board)
     header += [f"average {_label(m)}" for m in extra]
@@ -127,19 +158,24 @@ def table2(board: Leaderboard) -> Table:
         md = [str(p.rank), p.planner + (" *" if p.pareto else "")]
         for area in board.areas:
             e = entries.get((p.planner, area))
-            row += _spread_cells(e.coverage, 100) if e else [None, None, None]
-            md.append(_spread_text(e.coverage, 1, 100) if e else DASH)
-        row += [_scaled(p.mean_coverage, 100), _scaled(p.mean_relative_coverage, 100),
-                _scaled(p.mean_coverage_rank), _scaled(p.mean_fscore_rank),
+            row += _spread_cells(e.coverage, 100) if e else [None] * 5
+            md.append(_spread_text(e.coverage, 1, 100, extremes=False) if e else DASH)
+        row += [_scaled(p.mean_coverage, 100), *_interval_cells(p.mean_coverage_ci, 100),
+                _scaled(p.mean_relative_coverage, 100),
+                *_interval_cells(p.mean_relative_coverage_ci, 100),
+                _scaled(p.mean_coverage_rank), *_interval_cells(p.mean_coverage_rank_ci),
+                _scaled(p.mean_fscore_rank), *_interval_cells(p.mean_fscore_rank_ci),
                 "yes" if p.pareto else "no"]
-        md += [_fmt(p.mean_coverage, 1, 100), _fmt(p.mean_relative_coverage, 1, 100),
-               _fmt(p.mean_coverage_rank, 1)]
+        md += [_mean_text(p.mean_coverage, p.mean_coverage_ci, 1, 100),
+               _mean_text(p.mean_relative_coverage, p.mean_relative_coverage_ci, 1, 100),
+               _mean_text(p.mean_coverage_rank, p.mean_coverage_rank_ci, 1)]
         row += [_scaled(p.mean_metrics.get(m.key)) for m in extra]
         md += [_fmt(p.mean_metrics.get(m.key), _digits(m)) for m in extra]
         rows.append(row)
         md_rows.append(md)
-    return Table("table2", "Table 2: coverage per area, % (mean (min–max) over runs); "
-                 "* marks the Pareto set", header, rows, md_header, md_rows)
+    return Table("table2", "Table 2: coverage per area, % (mean [95 % interval] over runs); "
+                 "planners whose mean-rank intervals overlap share a rank; * marks the Pareto "
+                 "set", header, rows, md_header, md_rows)
 
 
 def table3(board: Leaderboard) -> Table:
@@ -150,7 +186,8 @@ def table3(board: Leaderboard) -> Table:
     for area in board.areas:
         header += _spread_header(f"{area} F-score %") + _spread_header(f"{area} RMSE cm")
         md_header += [f"{area} F", f"{area} RMSE"]
-    header += ["average F-score %", "average RMSE cm", "mean F-score rank"]
+    header += [*_interval_header("average F-score %"), "average RMSE cm",
+               *_interval_header("mean F-score rank")]
     md_header += ["Avg. F", "Avg. RMSE", "Avg. F rank"]
     rows: list[list[Cell]] = []
     md_rows: list[list[str]] = []
@@ -162,19 +199,21 @@ def table3(board: Leaderboard) -> Table:
         for area in board.areas:
             e = entries.get((p.planner, area))
             if e is None:
-                row += [None] * 6
+                row += [None] * 10
                 md += [DASH, DASH]
                 continue
             row += _spread_cells(e.fscore, 100) + _spread_cells(e.rmse_m, 100)
-            md += [_spread_text(e.fscore, 1, 100), _spread_text(e.rmse_m, 2, 100)]
-        row += [_scaled(p.mean_fscore, 100), _scaled(p.mean_rmse_m, 100),
-                _scaled(p.mean_fscore_rank)]
-        md += [_fmt(p.mean_fscore, 1, 100), _fmt(p.mean_rmse_m, 2, 100),
-               _fmt(p.mean_fscore_rank, 1)]
+            md += [_spread_text(e.fscore, 1, 100, extremes=False),
+                   _spread_text(e.rmse_m, 2, 100, extremes=False)]
+        row += [_scaled(p.mean_fscore, 100), *_interval_cells(p.mean_fscore_ci, 100),
+                _scaled(p.mean_rmse_m, 100), _scaled(p.mean_fscore_rank),
+                *_interval_cells(p.mean_fscore_rank_ci)]
+        md += [_mean_text(p.mean_fscore, p.mean_fscore_ci, 1, 100), _fmt(p.mean_rmse_m, 2, 100),
+               _mean_text(p.mean_fscore_rank, p.mean_fscore_rank_ci, 1)]
         rows.append(row)
         md_rows.append(md)
     return Table("table3", "Table 3: surface reconstruction, F-score % and RMSE cm "
-                 "(mean (min–max) over runs)", header, rows, md_header, md_rows)
+                 "(mean [95 % interval] over runs)", header, rows, md_header, md_rows)
 
 
 def table4(board: Leaderboard) -> Table:
@@ -183,10 +222,10 @@ def table4(board: Leaderboard) -> Table:
     header = ["area", "planner", "runs", *_spread_header("iterations"),
               *_spread_header("planning time ms"), *_spread_header("path length m"),
               *_spread_header("coverage %"), *_spread_header("F-score %"), "collisions",
-              "coverage rank", "F-score rank"]
+              "coverage rank", "F-score rank", "coverage group rank", "F-score group rank"]
     md_header = ["Area", "Planner", "Runs", "Iterations", "Planning time, ms",
                  "Path length, m", "Coverage, %", "F-score, %", "Collisions", "Coverage rank",
-                 "F-score rank"]
+                 "F-score rank", "Coverage group", "F-score group"]
     extra = extra_metrics(board)
     for m in extra:
         header += _spread_header(_label(m))
@@ -201,17 +240,20 @@ def table4(board: Leaderboard) -> Table:
             rows.append([area, e.planner, e.runs, *_spread_cells(e.iterations),
                          *_spread_cells(e.planning_ms), *_spread_cells(e.path_length_m),
                          *_spread_cells(e.coverage, 100), *_spread_cells(e.fscore, 100),
-                         e.collisions, e.coverage_rank, e.fscore_rank,
+                         e.collisions, e.coverage_rank, e.fscore_rank, e.coverage_group_rank,
+                         e.fscore_group_rank,
                          *(c for m in extra for c in _spread_cells(e.metrics.get(m.key, empty)))])
             md_rows.append([area, e.planner, str(e.runs), _spread_text(e.iterations, 0),
                             _spread_text(e.planning_ms, 1), _spread_text(e.path_length_m, 1),
                             _spread_text(e.coverage, 1, 100), _spread_text(e.fscore, 1, 100),
                             str(e.collisions), _fmt(e.coverage_rank, 1),
-                            _fmt(e.fscore_rank, 1),
+                            _fmt(e.fscore_rank, 1), _md(e.coverage_group_rank),
+                            _md(e.fscore_group_rank),
                             *(_spread_text(e.metrics.get(m.key, empty), _digits(m))
                               for m in extra)])
     return Table("table4", "Table 4: planning per area: iterations, planning time per "
-                 "iteration (median of a run), path length (mean (min–max) over runs)",
+                 "iteration (median of a run), path length (mean [95 % interval] (min–max) "
+                 "over runs); planners whose intervals overlap share a group rank",
                  header, rows, md_header, md_rows)
 
 

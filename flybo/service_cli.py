@@ -15,19 +15,21 @@ import os
 from pathlib import Path
 from typing import Any
 
+from flybo.baselines_commands import add_baselines_command, run_baselines
 from flybo.client_commands import run_jobs, run_results, run_submit, run_submit_planner
 from flybo.errors import CliError
 from flybo.local_commands import run_serve, run_tokens, run_viewer, run_worker
 from flybo.suite_commands import run_benchmark, run_report
 
 COMMANDS = ("serve", "worker", "viewer", "tokens", "submit", "submit-planner", "jobs",
-            "results", "benchmark", "report")
+            "results", "benchmark", "report", "baselines")
 DEFAULT_SERVER = "http://127.0.0.1:8000"
 
 
 def add_service_commands(sub: Any) -> None:
     _add_local_commands(sub)
     _add_client_commands(sub)
+    add_baselines_command(sub)
 
 
 def _add_local_commands(sub: Any) -> None:
@@ -136,12 +138,18 @@ def _add_suite_commands(sub: Any, client: Any) -> None:
     report.add_argument("--benchmark-version", default=None,
                         help="the benchmark version whose results to report (default: the "
                              "service's current one; GET /api/v1/benchmark-versions lists them)")
+    report.add_argument("--dataset", type=Path, default=None,
+                        help="report this baseline dataset (.json.xz) alone, without a service")
+    report.add_argument("--markdown", type=Path, default=None,
+                        help="write the Markdown here (default OUT/report.md), its links "
+                             "relative to it (docs/RESULTS.md: --out docs/results)")
 
 
 def run_service_command(args: argparse.Namespace) -> None:
     {"serve": run_serve, "worker": run_worker, "tokens": run_tokens, "submit": run_submit,
      "jobs": run_jobs, "results": run_results, "submit-planner": run_submit_planner,
-     "viewer": run_viewer, "benchmark": run_benchmark, "report": run_report}[args.command](args)
+     "viewer": run_viewer, "benchmark": run_benchmark, "report": run_report,
+     "baselines": run_baselines}[args.command](args)
 
 
 def check_planner(path: Path) -> None:

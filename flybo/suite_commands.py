@@ -1,5 +1,6 @@
 """The suite's commands: `flybo benchmark` (planners x areas x runs as one job group, followed to
-its end) and `flybo report` (the paper's tables and figures from a service)."""
+its end) and `flybo report` (the paper's tables and figures from a service, or from a baseline
+dataset alone)."""
 
 from __future__ import annotations
 
@@ -93,14 +94,21 @@ def run_report(args: argparse.Namespace) -> None:
     from flybo.report import ReportError, fetch_report_data, write_report  # the server's schemas
 
     try:
-        with httpx.Client(base_url=args.server.rstrip("/"), timeout=60.0) as client:
-            data = fetch_report_data(client, args.preset, args.benchmark_version)
+        if args.dataset is not None:
+            from flybo.report_dataset import dataset_report_data  # SQLAlchemy, Alembic: on use
+
+            if args.benchmark_version:
+                raise CliError("--benchmark-version does not go with --dataset: a dataset "
+                               "is of one benchmark version")
+            data = dataset_report_data(args.dataset, args.preset)
+        else:
+            with httpx.Client(base_url=args.server.rstrip("/"), timeout=60.0) as client:
+                data = fetch_report_data(client, args.preset, args.benchmark_version)
     except ReportError as exc:
         raise CliError(str(exc)) from None
-    written = write_report(data, args.out)
+    written = write_report(data, args.out, args.markdown)
     print(f"report of preset {args.preset}, benchmark version {data.benchmark_version} "
           f"({len(data.board.overall)} planner(s), "
           f"{len(data.board.areas)} area(s) with results) in {args.out}/:")
     for path in written:
-        print(f"  {path.name}")
-
+        print(f"  {path}")

@@ -191,7 +191,7 @@ def job_out(job: Job) -> JobOut:
         id=job.id, status=status, progress=round(progress, 4), planner=job.planner.key,
         preset=job.preset, seconds=job.seconds, runs_per_area=job.runs_per_area,
         areas=_job_areas(job), owner=job.user.name, created_at=job.created_at,
-        rerun_of=job.rerun_of_id, group_id=job.group_id,
+        rerun_of=job.rerun_of_id, group_id=job.group_id, reference=job.reference,
         runs=[RunBrief(id=r.id, area=r.area.name, seed=r.seed, status=r.status,
                        progress=round(1.0 if RunState(r.status).final else r.progress, 4))
               for r in job.runs],
@@ -206,6 +206,7 @@ _PLANNERS, _USERS, _AREAS = PlannerRow.__table__, User.__table__, AreaRow.__tabl
 _READ_JOB = (
     select(_JOBS.c.id, _JOBS.c.preset, _JOBS.c.seconds, _JOBS.c.runs_per_area,
            _JOBS.c.created_at, _JOBS.c.rerun_of_id, _JOBS.c.group_id,
+           _JOBS.c.reference,
            _PLANNERS.c.name.label("planner_name"), _PLANNERS.c.version.label("planner_version"),
            _USERS.c.name.label("owner"), _RUNS.c.id.label("run_id"),
            _AREAS.c.name.label("area"), _RUNS.c.seed, _RUNS.c.status, _RUNS.c.progress)
@@ -236,6 +237,7 @@ def read_job(conn: Connection, job_id: int) -> JobOut | None:
         planner=f"{job.planner_name}-v{job.planner_version}", preset=job.preset,
         seconds=job.seconds, runs_per_area=job.runs_per_area, areas=areas, owner=job.owner,
         created_at=job.created_at, rerun_of=job.rerun_of_id, group_id=job.group_id,
+        reference=bool(job.reference),
         runs=[RunBrief(id=r.run_id, area=r.area, seed=r.seed, status=r.status,
                        progress=round(1.0 if RunState(r.status).final else r.progress, 4))
               for r in runs],

@@ -9,7 +9,9 @@ ran. Relative coverage is a run's explored observable volume (the `explored_obse
 metric) over the best mean of any planner on that area; a legacy result, which has no metrics,
 counts its explored volume at the plateau time (`docs/metrics.md`). Besides these fixed columns
 a board carries every metric the measures flag for the leaderboard (`sim.measures.metric_infos`,
-`leaderboard=True`), mean/min/max per planner and area.
+`leaderboard=True`), mean/min/max per planner and area. Every mean over runs carries a
+bootstrap 95 % interval; planners whose intervals cannot be told apart share a rank
+(`server.board_statistics`, `docs/statistics.md`).
 
 Every API process caches the computed boards per database and (preset, benchmark version,
 area), with their JSON bodies, under the results version of the preset. Every request checks
@@ -33,9 +35,11 @@ from pydantic import TypeAdapter
 from sqlalchemy import Connection, Engine, func, select
 from sqlalchemy.orm import Session, sessionmaker
 
+from server.board_statistics import INFO as STATISTICS
+from server.board_statistics import Cell, annotate, describe
 from server.db import read_only
 from server.models import AreaRow, Job, PlannerRow, Run, RunResult, RunState
-from server.schemas import Leaderboard, LeaderboardEntry, LeaderboardPlanner, MetricOut, Spread
+from server.schemas import Leaderboard, LeaderboardEntry, LeaderboardPlanner, MetricOut
 
 
 @dataclass
@@ -44,13 +48,6 @@ class _Row:
     builtin: bool
     area: str
     result: RunResult
-
-
-def spread(values: Sequence[float | None]) -> Spread:
-    finite = [v for v in values if v is not None]
-    if not finite:
-        return Spread(mean=None, min=None, max=None)
-    return Spread(mean=sum(finite) / len(finite), min=min(finite), max=max(finite))
 
 
 def ranks(scores: dict[str, float]) -> dict[str, float]:
@@ -292,6 +289,9 @@ def _explored(result: RunResult) -> float:
     return observable if observable is not None else result.volume_at_plateau_m3
 
 
+_METRIC = "metric:"  # a measures' metric among a cell's columns (`describe`)
+
+
 def _mean(values: Sequence[float | None]) -> float | None:
     finite = [v for v in values if v is not None]
     return sum(finite) / len(finite) if finite else None
@@ -323,23 +323,26 @@ def compute_leaderboard(session: Session, preset: str, area: str | None = None, 
     metrics = leaderboard_metrics()
 
     entries: list[LeaderboardEntry] = []
+    cells: dict[tuple[str, str], Cell] = {}
     for (planner, area_name), members in sorted(groups.items()):
         results = [m.result for m in members]
         best = best_volume[area_name]
+        spreads, cells[(planner, area_name)] = describe(planner, area_name, {
+            "coverage": [r.coverage for r in results],
+            "relative_coverage": [_explored(r) / best if best > 0 else 0.0 for r in results],
+            "fscore": [r.fscore for r in results], "rmse_m": [r.rmse_m for r in results],
+            "path_length_m": [r.path_length_m for r in results],
+            "iterations": [float(r.iterations) for r in results],
+            "planning_ms": [r.planning_ms_median for r in results],
+            **{_METRIC + m.key: [metric_value(r, m.key) for r in results] for m in metrics}})
         entries.append(LeaderboardEntry(
             planner=planner, builtin=members[0].builtin, area=area_name, runs=len(members),
-            coverage=spread([r.coverage for r in results]),
-            relative_coverage=spread([_explored(r) / best if best > 0 else 0.0
-                                      for r in results]),
-            fscore=spread([r.fscore for r in results]),
-            rmse_m=spread([r.rmse_m for r in results]),
-            path_length_m=spread([r.path_length_m for r in results]),
-            iterations=spread([float(r.iterations) for r in results]),
-            planning_ms=spread([r.planning_ms_median for r in results]),
-            collisions=sum(r.collisions for r in results),
+            coverage=spreads["coverage"], relative_coverage=spreads["relative_coverage"],
+            fscore=spreads["fscore"], rmse_m=spreads["rmse_m"],
+            path_length_m=spreads["path_length_m"], iterations=spreads["iterations"],
+            planning_ms=spreads["planning_ms"], collisions=sum(r.collisions for r in results),
             coverage_rank=0.0, fscore_rank=None,
-            metrics={m.key: spread([metric_value(r, m.key) for r in results]) for m in metrics},
-        ))
+            metrics={m.key: spreads[_METRIC + m.key] for m in metrics}))
     for area_name in area_names:
         here = [e for e in entries if e.area == area_name]
         cov = ranks({e.planner: e.coverage.mean or 0.0 for e in here})
@@ -347,9 +350,11 @@ def compute_leaderboard(session: Session, preset: str, area: str | None = None, 
         for e in here:
             e.coverage_rank = cov[e.planner]
             e.fscore_rank = fs.get(e.planner)
+    overall = _overall(entries, metrics)
+    annotate(entries, overall, cells)
     return Leaderboard(preset=preset, benchmark_version=benchmark_version,
-                       metrics=metrics, areas=area_names,
-                       overall=_overall(entries, metrics), entries=entries)
+                       metrics=metrics, areas=area_names, overall=overall, entries=entries,
+                       statistics=STATISTICS)
 
 
 def _overall(entries: list[LeaderboardEntry],

@@ -22,6 +22,7 @@ from sqlalchemy import (
     String,
     Text,
     UniqueConstraint,
+    text,
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 from sqlalchemy.types import TypeDecorator
@@ -187,6 +188,9 @@ class Job(Base):
     created_at: Mapped[datetime] = mapped_column(_TS, default=utcnow, index=True)
     group_id: Mapped[int | None] = mapped_column(ForeignKey("job_groups.id"), nullable=True,
                                                  index=True)
+    # Loaded from a baseline dataset (`server.baselines`), not flown by this service.
+    reference: Mapped[bool] = mapped_column(Boolean, default=False,
+                                            server_default=text("false"))
 
     planner: Mapped[PlannerRow] = relationship()
     user: Mapped[User] = relationship()

@@ -86,6 +86,9 @@ class JobOut(BaseModel):
     rerun_of: int | None
     group_id: int | None = Field(description="the job group (`/groups/{id}`) it belongs to, "
                                  "if any; a re-run joins the group of the job it re-runs")
+    reference: bool = Field(default=False, description="its runs are reference results "
+                            "loaded from a baseline dataset (`docs/baselines.md`), not flown "
+                            "by this service")
     runs: list[RunBrief]
 
 
@@ -162,6 +165,27 @@ class Spread(BaseModel):
     mean: float | None
     min: float | None
     max: float | None
+    ci_low: float | None = Field(default=None, description="the 95 % confidence interval of "
+                                 "the mean over runs (percentile bootstrap, "
+                                 "`Leaderboard.statistics`): lower bound")
+    ci_high: float | None = Field(default=None, description="its upper bound")
+
+
+class Interval(BaseModel):
+    """A 95 % confidence interval (`Leaderboard.statistics`)."""
+
+    low: float
+    high: float
+
+
+class StatisticsInfo(BaseModel):
+    """How the leaderboard's intervals and tie groups are made (`docs/statistics.md`)."""
+
+    method: str
+    confidence: float
+    resamples: int
+    seed: int
+    tie_rule: str
 
 
 class MetricOut(BaseModel):
@@ -189,6 +213,11 @@ class LeaderboardEntry(BaseModel):
     collisions: int
     coverage_rank: float
     fscore_rank: float | None
+    coverage_group_rank: int | None = Field(
+        default=None, description="the rank of its tie group on this area by mean coverage: "
+        "planners whose coverage intervals cannot be told apart share it")
+    fscore_group_rank: int | None = Field(
+        default=None, description="the same by mean F-score; null without F-scores")
     metrics: dict[str, Spread] = Field(
         default_factory=dict, description="each of `Leaderboard.metrics` over the runs "
         "(a run where it is undefined, such as a coverage never reached, is left out)")
@@ -203,7 +232,9 @@ class LeaderboardPlanner(BaseModel):
     mean_fscore: float | None
     mean_coverage_rank: float
     mean_fscore_rank: float | None
-    rank: int
+    rank: int = Field(description="by mean coverage rank; planners whose mean coverage rank "
+                      "intervals cannot be told apart share a rank (tie groups, "
+                      "`Leaderboard.statistics`)")
     mean_rmse_m: float | None = Field(default=None, description="mean over areas of the "
                                       "per-area mean RMSE")
     pareto: bool = Field(default=False, description="not dominated in (mean coverage rank, "
@@ -212,6 +243,11 @@ class LeaderboardPlanner(BaseModel):
     mean_metrics: dict[str, float | None] = Field(
         default_factory=dict, description="each of `Leaderboard.metrics`: the mean over areas "
         "of the per-area means (areas where it is undefined left out)")
+    mean_coverage_ci: Interval | None = None
+    mean_relative_coverage_ci: Interval | None = None
+    mean_fscore_ci: Interval | None = None
+    mean_coverage_rank_ci: Interval | None = None
+    mean_fscore_rank_ci: Interval | None = None
 
 
 class Leaderboard(BaseModel):
@@ -223,6 +259,8 @@ class Leaderboard(BaseModel):
     areas: list[str]
     overall: list[LeaderboardPlanner]
     entries: list[LeaderboardEntry]
+    statistics: StatisticsInfo | None = Field(default=None, description="how the intervals "
+                                              "and tie groups were made")
 
 
 class Band(BaseModel):

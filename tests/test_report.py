@@ -86,6 +86,11 @@ def test_report_from_a_real_app(client: TestClient, tmp_path: Path) -> None:
     assert float(alpha["maze coverage % mean"]) == pytest.approx(70.0)
     assert float(alpha["maze coverage % min"]) == pytest.approx(60.0)
     assert float(alpha["maze coverage % max"]) == pytest.approx(80.0)
+    assert float(alpha["maze coverage % ci low"]) == pytest.approx(60.0)
+    assert float(alpha["maze coverage % ci high"]) == pytest.approx(80.0)
+    # One area: alpha is second in every resample, so its mean rank's interval is [2, 2].
+    assert (alpha["mean coverage rank ci low"], alpha["mean coverage rank ci high"]) == (
+        "2.0", "2.0")
     assert float(alpha["average coverage %"]) == pytest.approx(70.0)
     # Relative coverage: volume at the plateau (4 m³ in both of alpha's runs) over the best
     # planner's mean (beta's 6 m³).
@@ -113,7 +118,10 @@ def test_report_from_a_real_app(client: TestClient, tmp_path: Path) -> None:
     markdown = (out / "report.md").read_text()
     assert markdown.startswith(f"# FLYBO report, preset `default`, benchmark version "
                                f"`{current_version()}`")
-    assert "70.0 (60.0–80.0)" in markdown and "![Figure 4" in markdown
+    # Table 4: the mean, its bootstrap interval (two runs: the resampled means are 60, 70 or
+    # 80 %) and the extremes; Table 2 leaves the extremes to its CSV.
+    assert "70.0 [60.0, 80.0] (60.0–80.0)" in markdown and "![Figure 4" in markdown
+    assert "| 2 | alpha-v1 * | 70.0 [60.0, 80.0] |" in markdown
     assert "beta-v1 *" in markdown  # beta is in the Pareto set
 
     for stem in ("figure4", "figure5", "figure6"):

@@ -29,8 +29,15 @@ from server.catalog import preset_names
 from server.deps import SessionDep
 from server.leaderboard import build_leaderboard
 from server.models import Run
-from server.schemas import Leaderboard, LeaderboardEntry, LeaderboardPlanner, MetricOut
-from web.html import DASH, esc, not_found, num, options, page, planner_link, spread_td, table, td
+from server.schemas import (
+    Interval,
+    Leaderboard,
+    LeaderboardEntry,
+    LeaderboardPlanner,
+    MetricOut,
+    Spread,
+)
+from web.html import DASH, esc, not_found, num, options, page, planner_link, table, td
 from web.jobs_page import recent_jobs_table
 
 router = APIRouter(include_in_schema=False)
@@ -65,14 +72,39 @@ def _entry_map(board: Leaderboard) -> dict[tuple[str, str], LeaderboardEntry]:
     return {(e.planner, e.area): e for e in board.entries}
 
 
-def _rank(value: float | None) -> str:
-    return td(num(value, 1), value, "num")
+CI_TITLE = "95 % confidence interval of the mean (percentile bootstrap over runs)"
+
+
+def _ci(low: float | None, high: float | None, digits: int, scale: float = 1.0) -> str:
+    if low is None or high is None:
+        return ""
+    return (f"<span class='ci' title='{CI_TITLE}'>[{num(low, digits, scale)}, "
+            f"{num(high, digits, scale)}]</span>")
+
+
+def spread_td(s: Spread, digits: int = 2, scale: float = 1.0) -> str:
+    """Mean over runs, its 95 % interval, and the range from the smallest to the largest run."""
+    if s.mean is None:
+        return td(DASH, None)
+    rng = ""
+    if s.min is not None and s.max is not None and s.max != s.min:
+        rng = (f"<span class='range'>{num(s.min, digits, scale)}{DASH}"
+               f"{num(s.max, digits, scale)}</span>")
+    return td(f"{num(s.mean, digits, scale)}{_ci(s.ci_low, s.ci_high, digits, scale)}{rng}",
+              s.mean, "num")
+
+
+def _mean_td(value: float | None, interval: Interval | None, digits: int,
+             scale: float = 1.0) -> str:
+    ci = "" if interval is None else _ci(interval.low, interval.high, digits, scale)
+    return td(f"{num(value, digits, scale)}{ci}", value, "num")
 
 
 def _coverage_table(board: Leaderboard) -> str:
     """Table 2: coverage per area (mean, with min-max over runs), averages and rank."""
     entries = _entry_map(board)
-    headers = [("Rank", "by mean coverage rank"), ("Planner", "")]
+    headers = [("Rank", "by mean coverage rank; planners whose intervals of it overlap share a "
+                        "rank (docs/statistics.md)"), ("Planner", "")]
     headers += [(esc(a), f"coverage on {a}, %") for a in board.areas]
     headers += [("Average", "mean coverage over areas, %"),
                 ("Relative", "mean relative coverage (the paper's: volume at the plateau over "
@@ -87,14 +119,15 @@ def _coverage_table(board: Leaderboard) -> str:
         for area in board.areas:
             e = entries.get((p.planner, area))
             cells.append(spread_td(e.coverage, 1, 100) if e else td(DASH))
-        cells += [td(num(p.mean_coverage, 1, 100), p.mean_coverage, "num"),
-                  td(num(p.mean_relative_coverage, 1, 100), p.mean_relative_coverage, "num"),
-                  _rank(p.mean_coverage_rank)]
+        cells += [_mean_td(p.mean_coverage, p.mean_coverage_ci, 1, 100),
+                  _mean_td(p.mean_relative_coverage, p.mean_relative_coverage_ci, 1, 100),
+                  _mean_td(p.mean_coverage_rank, p.mean_coverage_rank_ci, 1)]
         for m in extra:
             value = p.mean_metrics.get(m.key)
             cells.append(td(num(value, _digits(m.fmt)), value, "num"))
         rows.append(_overall_row(p, cells))
-    return table("Table 2: coverage per area, % (mean; min–max over runs)", headers, rows,
+    return table("Table 2: coverage per area, % (mean; [95 % interval]; min–max over runs)",
+                 headers, rows,
                  table_id="coverage-table", empty="No results yet.")
 
 
@@ -102,8 +135,16 @@ def _overall_row(p: LeaderboardPlanner, cells: list[str]) -> str:
     # The ranks ride along as data attributes: leaderboard.js draws Figure 6 from them.
     fs_rank = "" if p.mean_fscore_rank is None else f"{p.mean_fscore_rank:.6g}"
     return (f"<tr data-planner='{esc(p.planner)}' data-coverage-rank='{p.mean_coverage_rank:.6g}'"
-            f" data-fscore-rank='{fs_rank}' data-pareto='{'1' if p.pareto else '0'}'>"
-            f"{''.join(cells)}</tr>")
+            f" data-fscore-rank='{fs_rank}' data-pareto='{'1' if p.pareto else '0'}'"
+            f"{_interval_data('coverage-rank', p.mean_coverage_rank_ci)}"
+            f"{_interval_data('fscore-rank', p.mean_fscore_rank_ci)}>{''.join(cells)}</tr>")
+
+
+def _interval_data(name: str, interval: Interval | None) -> str:
+    """The interval's bounds as data attributes (Figure 6 draws them as error bars)."""
+    if interval is None:
+        return ""
+    return f" data-{name}-low='{interval.low:.6g}' data-{name}-high='{interval.high:.6g}'"
 
 
 def _surface_table(board: Leaderboard) -> str:
@@ -124,11 +165,12 @@ def _surface_table(board: Leaderboard) -> str:
             e = entries.get((p.planner, area))
             cells += [spread_td(e.fscore, 1, 100), spread_td(e.rmse_m, 2, 100)] if e else [
                 td(DASH), td(DASH)]
-        cells += [td(num(p.mean_fscore, 1, 100), p.mean_fscore, "num"),
+        cells += [_mean_td(p.mean_fscore, p.mean_fscore_ci, 1, 100),
                   td(num(p.mean_rmse_m, 2, 100), p.mean_rmse_m, "num"),
-                  _rank(p.mean_fscore_rank)]
+                  _mean_td(p.mean_fscore_rank, p.mean_fscore_rank_ci, 1)]
         rows.append(f"<tr>{''.join(cells)}</tr>")
-    return table("Table 3: surface reconstruction, F-score % and RMSE cm (mean; min–max)",
+    return table("Table 3: surface reconstruction, F-score % and RMSE cm (mean; [95 % "
+                 "interval]; min–max)",
                  headers, rows, table_id="surface-table", empty="No results yet.")
 
 
@@ -138,7 +180,10 @@ def _area_table(board: Leaderboard, area: str | None) -> str:
     headers = [("Planner", ""), ("Runs", "succeeded runs"), ("Iterations", "plan calls"),
                ("Planning time, ms", "median wall time of a plan call"),
                ("Path length, m", "flown path"), ("Coverage, %", ""), ("F-score, %", ""),
-               ("Collisions", "over all runs"), ("Coverage rank", ""), ("F-score rank", "")]
+               ("Collisions", "over all runs"),
+               ("Coverage rank", "the rank of its tie group: planners whose coverage intervals "
+                                 "overlap share it"),
+               ("F-score rank", "the same by F-score")]
     extra = _extra_metrics(board)
     headers += [_metric_header(m, f"{m.label} over the runs") for m in extra]
     rows = [
@@ -147,12 +192,20 @@ def _area_table(board: Leaderboard, area: str | None) -> str:
             spread_td(e.iterations, 0), spread_td(e.planning_ms, 1),
             spread_td(e.path_length_m, 1), spread_td(e.coverage, 1, 100),
             spread_td(e.fscore, 1, 100), td(str(e.collisions), e.collisions, "num"),
-            _rank(e.coverage_rank), _rank(e.fscore_rank),
+            _group(e.coverage_group_rank, e.coverage_rank),
+            _group(e.fscore_group_rank, e.fscore_rank),
             *(spread_td(e.metrics[m.key], _digits(m.fmt)) if m.key in e.metrics else td(DASH)
               for m in extra)]) + "</tr>"
         for e in sorted(here, key=lambda e: e.coverage_rank)]
     return table(f"Table 4: planning on {area or DASH} (mean; min–max over runs)", headers, rows,
                  table_id="area-table", empty="No results on this area yet.")
+
+
+def _group(rank: int | None, paper: float | None) -> str:
+    """A tie group's rank, with the paper's rank by the mean alone in its tooltip."""
+    if rank is None:
+        return td(DASH)
+    return td(f"<span title='by the mean alone: {num(paper, 1)}'>{rank}</span>", rank, "num")
 
 
 def _controls(presets: list[str], preset: str, areas: list[str], area: str | None,
@@ -210,8 +263,9 @@ def _figures(preset: str, area: str | None, version: str) -> str:
         "</figure>"
         "<figure><div class='chart' id='pareto-chart' data-source='coverage-table' role='img' "
         "aria-label='Coverage rank against F-score rank'></div><figcaption>Figure 6: mean "
-        "coverage rank against mean F-score rank (1 is best); the Pareto set is joined by a line."
-        " Ranks are in Tables 2 and 3.</figcaption></figure>"
+        "coverage rank against mean F-score rank (1 is best), with their 95 % intervals as "
+        "error bars; the Pareto set is joined by a line. Ranks are in Tables 2 and 3."
+        "</figcaption></figure>"
         "</div></section>")
 
 
@@ -240,7 +294,9 @@ def leaderboard_page(
         f"<p class='lead'>Exploration planners on simulated areas, preset <code>{esc(preset)}"
         f"</code>, benchmark version <code id='benchmark-version'>{esc(version)}</code>"
         f"{' (current)' if version == current else ''}. Every figure is the mean over "
-        "succeeded runs; the small numbers give the smallest and largest run. Built-in "
+        "succeeded runs, with its 95 % confidence interval in brackets and the smallest and "
+        "largest run below; planners whose intervals cannot be told apart share a rank "
+        "(<a href='/docs'>API</a>: <code>statistics</code>). Built-in "
         "planners are marked <span class='badge'>baseline</span>. Click a column header to "
         "sort.</p>"
         f"{_versions(version_counts(session, preset), current, version, preset, chosen)}"

@@ -224,6 +224,7 @@ def test_leaderboard_is_empty_without_results(client: TestClient) -> None:
     board = client.get("/api/v1/leaderboard", params={"preset": "default"}).json()
     assert board.pop("benchmark_version") == current_version()
     assert "time_to_90_coverage_s" in {m["key"] for m in board.pop("metrics")}
+    assert board.pop("statistics")["resamples"] == 2000  # how intervals would be made
     assert board == {"preset": "default", "areas": [], "overall": [], "entries": []}
     versions = client.get("/api/v1/benchmark-versions").json()
     assert versions == {"current": current_version(), "preset": None, "versions": []}

@@ -309,7 +309,8 @@ def test_relative_coverage_compares_the_explored_observable_volume(
     assert "time_to_90_coverage_s" in keys and "coverage" in keys
     assert "explored_observable_m3" not in keys  # not a leaderboard metric
     a = next(e for e in board["entries"] if e["planner"] == "lb-a-v1")
-    assert a["metrics"]["time_to_90_coverage_s"] == {"mean": 40.0, "min": 40.0, "max": 40.0}
+    assert a["metrics"]["time_to_90_coverage_s"] == {"mean": 40.0, "min": 40.0, "max": 40.0,
+                                                     "ci_low": 40.0, "ci_high": 40.0}
     assert a["metrics"]["coverage"]["mean"] == pytest.approx(0.5)
     means = {p["planner"]: p["mean_metrics"]["time_to_90_coverage_s"] for p in board["overall"]}
     assert means == {"lb-a-v1": 40.0, "lb-b-v1": 80.0}

@@ -12,7 +12,7 @@ from sqlalchemy.orm import Session
 
 from server.db import make_engine
 from server.migrate import alembic_config, upgrade
-from server.models import LEGACY_VERSION, Base, Run, RunResult
+from server.models import LEGACY_VERSION, Base, Job, Run, RunResult
 
 
 def test_migrations_match_the_models(database_url: str) -> None:
@@ -76,6 +76,8 @@ def test_results_stored_before_versions_read_legacy(database_url: str) -> None:
             (1, LEGACY_VERSION, None, None), (2, LEGACY_VERSION, None, None)]
         assert [r.volume_at_plateau_m3 for r in rows] == [41.0, 42.0]  # nothing else changed
         assert session.scalar(select(func.count()).select_from(Run)) == 2
+        # Revision 0004: the jobs stored before are no reference results.
+        assert session.scalars(select(Job.reference)).all() == [False]
     with engine.connect() as conn:
         column = next(c for c in inspect(conn).get_columns("run_results")
                       if c["name"] == "benchmark_version")

@@ -62,7 +62,12 @@ def test_leaderboard_tables(site: Site) -> None:
     assert order == ["beta-v1", "alpha-v1", "gamma-v1"]
     alpha_row = coverage[coverage.index("data-planner='alpha-v1'"):]
     alpha_row = alpha_row[:alpha_row.index("</tr>")]
-    assert ">70.0<span class='range'>60.0–80.0</span>" in alpha_row  # mean; min-max
+    # The mean, its bootstrap interval (two runs: resampled means of 60, 70 or 80 %), min-max.
+    assert (">70.0<span class='ci' title='95 % confidence interval of the mean (percentile "
+            "bootstrap over runs)'>[60.0, 80.0]</span><span class='range'>60.0–80.0</span>"
+            in alpha_row)
+    # Figure 6's error bars ride along: alpha is second in every resample.
+    assert "data-coverage-rank-low='2' data-coverage-rank-high='2'" in alpha_row
     assert "baseline" in alpha_row
     beta_row = coverage[coverage.index("data-planner='beta-v1'"):]
     assert "baseline" not in beta_row[:beta_row.index("</tr>")]  # uploaded, not built in

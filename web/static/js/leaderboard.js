@@ -1,6 +1,6 @@
 // The leaderboard's figures: explored volume and surface recall over time on the chosen area
 // (the paper's Figures 4 and 5) from /api/v1/curves (of the page's benchmark version), and coverage rank against F-score rank
-// with the Pareto set (Figure 6) from the ranks in Table 2's rows.
+// with the Pareto set (Figure 6) from the ranks in Table 2's rows, each with its 95 % interval.
 "use strict";
 (function () {
   const C = window.FlyboCharts;
@@ -28,20 +28,42 @@
     }
   }
 
+  function bound(text) {
+    return text === undefined || text === "" ? null : Number(text);
+  }
+
   function pareto() {
     if (!paretoEl) return;
     const table = document.getElementById(paretoEl.dataset.source);
     const points = Array.from(table ? table.querySelectorAll("tbody tr[data-planner]") : [])
       .filter((tr) => tr.dataset.fscoreRank !== "")
       .map((tr) => ({ name: tr.dataset.planner, x: Number(tr.dataset.coverageRank),
-                      y: Number(tr.dataset.fscoreRank), pareto: tr.dataset.pareto === "1" }))
+                      y: Number(tr.dataset.fscoreRank), pareto: tr.dataset.pareto === "1",
+                      // The 95 % intervals of both mean ranks, drawn as error bars.
+                      x0: bound(tr.dataset.coverageRankLow), x1: bound(tr.dataset.coverageRankHigh),
+                      y0: bound(tr.dataset.fscoreRankLow), y1: bound(tr.dataset.fscoreRankHigh) }))
       .sort((a, b) => a.x - b.x || a.y - b.y);
     if (!points.length) { C.note(paretoEl, "No planner has both ranks yet."); return; }
-    const top = Math.max(...points.map((p) => Math.max(p.x, p.y))) + 0.5;
+    const top = Math.max(...points.map((p) => Math.max(p.x, p.y, p.x1 ?? 0, p.y1 ?? 0))) + 0.5;
     const labels = {
       hooks: { draw: [(u) => {
         const ctx = u.ctx;
         ctx.save();
+        ctx.strokeStyle = "#4a5560";
+        ctx.lineWidth = devicePixelRatio;
+        points.forEach((p) => {
+          const px = u.valToPos(p.x, "x", true), py = u.valToPos(p.y, "y", true);
+          ctx.beginPath();
+          if (p.x0 !== null && p.x1 !== null) {
+            ctx.moveTo(u.valToPos(p.x0, "x", true), py);
+            ctx.lineTo(u.valToPos(p.x1, "x", true), py);
+          }
+          if (p.y0 !== null && p.y1 !== null) {
+            ctx.moveTo(px, u.valToPos(p.y0, "y", true));
+            ctx.lineTo(px, u.valToPos(p.y1, "y", true));
+          }
+          ctx.stroke();
+        });
         ctx.fillStyle = "#14171a";
         ctx.font = `${Math.round(12 * devicePixelRatio)}px system-ui, sans-serif`;
         points.forEach((p) => {
