@@ -311,7 +311,8 @@ def _run(args: argparse.Namespace) -> None:
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
-    _print_summary({**result.to_json(), "reproducibility": record}, out)
+    _print_summary({**result.to_json(), "reproducibility": record}, out,
+                   len(result.mesh_triangles))
 
 
 def _run_with_progress(
@@ -347,7 +348,7 @@ def _run_with_progress(
     return result
 
 
-def _print_summary(payload: dict[str, Any], out: Path) -> None:
+def _print_summary(payload: dict[str, Any], out: Path, mesh_triangles: int) -> None:
     from worker.result_folder import MESH, RECORDING, RESULT  # numpy: on use
 
     surface = payload["surface"]
@@ -374,6 +375,9 @@ def _print_summary(payload: dict[str, Any], out: Path) -> None:
         ("surface precision / recall",
          f"{num(surface['precision'], '.3f')} / {num(surface['recall'], '.3f')}"),
         ("surface RMSE", f"{num(surface['rmse_m'], '.4f')} m"),
+        # An empty reconstruction (nothing within camera range) is scored as such, not lost.
+        ("reconstructed mesh", f"{mesh_triangles:,} triangles" if mesh_triangles
+         else "none: no surface was seen (an empty mesh.ply)"),
         ("time to 90 % coverage",
          f"{num(payload['metrics'].get('time_to_90_coverage_s'), '.0f')} s"),
         ("planning charged", f"{payload['planning_charge']['total_s']:.2f} s "

@@ -373,3 +373,34 @@ def test_the_command_loads_no_numerical_library_before_a_command_runs() -> None:
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
                          check=True, timeout=120)
     assert out.stdout.strip() == ""
+
+
+def test_a_run_that_sees_no_surface_keeps_its_results(tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str],
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """A start with nothing within camera range: the run reconstructs no surface, is scored as
+    such and keeps every file; the summary says so."""
+    import trimesh
+
+    from areas.area import Area, AreaInfo, StartPose
+    from areas.store import save_area
+
+    monkeypatch.setenv("FLYBO_DATA_DIR", str(tmp_path / "data"))
+    monkeypatch.setenv("FLYBO_CACHE_DIR", str(tmp_path / "cache"))
+    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    box.apply_translation((27.0, 27.0, 0.5))
+    save_area(Area(
+        name="far", vertices=np.asarray(box.vertices, dtype=np.float64),
+        triangles=np.asarray(box.faces, dtype=np.int32), bounds_min=np.zeros(3),
+        bounds_max=np.array([30.0, 30.0, 4.0]),
+        start=StartPose(position=np.array([3.0, 3.0, 2.0]), yaw=0.0), plateau_s=300.0,
+        voxel_size=0.2, info=AreaInfo(title="far", rooms=None, levels=1,
+                                      complexity="imported", indoor=False)))
+    out = tmp_path / "run"
+    main(["run", "--area", "far", "--planner", "classic", "--seconds", "3", "--preset", "exact",
+          "--out", str(out)])
+    assert "no surface was seen" in capsys.readouterr().out
+    assert sorted(p.name for p in out.iterdir()) == ["mesh.ply", "recording.npz", "result.json"]
+    assert "element vertex 0" in (out / "mesh.ply").read_text()
+    result = json.loads((out / "result.json").read_text())
+    assert result["surface"]["recall"] in (0.0, None)
