@@ -31,9 +31,14 @@ DOCKER_CAPABILITIES = ("AUDIT_WRITE", "CHOWN", "DAC_OVERRIDE", "FOWNER", "FSETID
                        "MKNOD", "NET_BIND_SERVICE", "NET_RAW", "SETFCAP", "SETGID", "SETPCAP",
                        "SETUID", "SYS_CHROOT")
 # Compose keys that do not change what a process in the container may do.
-NOT_ISOLATION = {"build", "image", "env_file", "ports", "volumes", "depends_on", "healthcheck",
-                 "command", "deploy", "restart", "labels", "logging", "container_name",
-                 "environment", "stop_grace_period"}
+NOT_ISOLATION = {"build", "image", "env_file", "ports", "expose", "volumes", "depends_on",
+                 "healthcheck", "command", "deploy", "restart", "labels", "logging",
+                 "container_name", "hostname", "environment", "stop_grace_period", "stop_signal",
+                 "networks", "extra_hosts", "dns", "profiles", "working_dir", "tty",
+                 "stdin_open"}
+# Compose keys of a plain `--key value` podman option.
+SAME_OPTION = {"mem_limit": "--memory", "pids_limit": "--pids-limit", "shm_size": "--shm-size",
+               "cpus": "--cpus", "user": "--user"}
 PODMAN_SECCOMP = Path("/usr/share/containers/seccomp.json")
 # Calls Docker's default profile allows only with CAP_SYS_ADMIN; `clone` also without it when
 # it asks for no new namespace (CLONE_NEWNS | NEWCGROUP | NEWUTS | NEWIPC | NEWUSER | NEWPID |
@@ -109,10 +114,10 @@ def podman_options(service: dict[str, Any]) -> list[str]:
             args += _security_opts(list(value))
         elif key == "privileged":
             args += ["--privileged"] if value else []
-        elif key == "read_only":
-            args += ["--read-only"] if value else []
-        elif key == "user":
-            args += ["--user", str(value)]
+        elif key in ("read_only", "init"):
+            args += [f"--{key.replace('_', '-')}"] if value else []
+        elif key in SAME_OPTION:
+            args += [SAME_OPTION[key], str(value)]
         else:
             raise UnknownSettingError(f"{key}: {value!r}")
     return [*args, "--cgroupns", cgroupns]
