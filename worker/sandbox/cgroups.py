@@ -166,7 +166,9 @@ def sweep_stale(iso: Isolation) -> list[Path]:
 def make_cgroups(iso: Isolation, limits: SandboxLimits) -> Cgroups:
     with _stale_lock:
         _stale_cgroups[:] = [path for path in _stale_cgroups if not _remove_cgroup(path)]
-    name = f"sbx-{os.getpid()}-{_start_time(os.getpid())}-{uuid.uuid4().hex[:12]}"
+    start = _start_time(os.getpid())
+    owner = f"{os.getpid()}-{start}-" if start is not None else ""  # else: an unknown owner's
+    name = f"sbx-{owner}{uuid.uuid4().hex[:12]}"
     paths: list[Path] = []
     memory: Path | None = None
     if iso.cgroup_pids is not None:
