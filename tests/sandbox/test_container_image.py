@@ -20,7 +20,6 @@ import pytest
 from tests.sandbox import container_settings as image
 from tests.sandbox.conftest import required
 
-pytestmark = pytest.mark.slow
 SECRET = "canary-secret-" + "x" * 40
 
 
@@ -105,6 +104,7 @@ def _in_container(service: dict[str, Any], tmp_path: Path, *, probe_only: bool) 
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow  # a container, and five flights in it
 def test_the_containers_contain_hostile_planners(tmp_path: Path) -> None:
     distinct = {json.dumps(image.podman_options(image.services()[name])): name
                 for name in image.SANDBOX_SERVICES}  # the same settings are tried once
@@ -143,6 +143,7 @@ def _without(setting: str) -> dict[str, Any]:
     return service
 
 
+@pytest.mark.slow  # a container each
 @pytest.mark.parametrize(("setting", "missing"), [
     ("cap_add", "no writable pids cgroup"),
     ("systempaths=unconfined", "bubblewrap cannot create namespaces here"),
