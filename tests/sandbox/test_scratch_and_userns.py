@@ -95,13 +95,20 @@ def test_a_planner_cannot_create_a_user_namespace(tmp_path: Path, isolated: None
     assert "unshare gave -1 (No space left on device)" in reason, reason
 
 
-# Calls that succeed for any process without the filter: unshare of nothing, and asking to be
-# traced by its parent.
+# Calls that succeed for any process without the filter: unshare of nothing, asking to be traced
+# by its parent, a tmpfs mounted in its own mount namespace (its user namespace's root may),
+# asking for its keyring's id; and bpf, which the filter refuses before the kernel looks at it.
 FILTERED = """
 libc = ctypes.CDLL(None, use_errno=True)
+libc.syscall.restype = ctypes.c_long
 found = {}
+KEYCTL_GET_KEYRING_ID, KEY_SPEC_PROCESS_KEYRING, SYS_BPF, SYS_KEYCTL = 0, -2, 321, 250  # x86-64
 for name, call in (('unshare', lambda: libc.unshare(0)),
-                   ('ptrace', lambda: libc.ptrace(0, 0, None, None))):
+                   ('ptrace', lambda: libc.ptrace(0, 0, None, None)),
+                   ('mount', lambda: libc.mount(b'none', b'/sandbox/work', b'tmpfs', 0, None)),
+                   ('keyctl', lambda: libc.syscall(SYS_KEYCTL, KEYCTL_GET_KEYRING_ID,
+                                                   KEY_SPEC_PROCESS_KEYRING, 1)),
+                   ('bpf', lambda: libc.syscall(SYS_BPF, 0, None, 0))):
     result = call()
     found[name] = (result, os.strerror(ctypes.get_errno()) if result != 0 else None)
 raise RuntimeError(repr(found))
@@ -113,8 +120,8 @@ def test_the_seccomp_filter_refuses_its_calls(tmp_path: Path, isolated: None) ->
         required(f"no seccomp filter here: {'; '.join(probe().notes)}")
     reason, _ = _fly_holding(tmp_path, _planner(FILTERED), SandboxLimits())
     found = ast.literal_eval(reason[reason.index("{"):reason.rindex("}") + 1])
-    assert found == {"unshare": (-1, "Operation not permitted"),
-                     "ptrace": (-1, "Operation not permitted")}, found
+    refused = (-1, "Operation not permitted")
+    assert found == dict.fromkeys(("unshare", "ptrace", "mount", "keyctl", "bpf"), refused), found
 
 
 def test_an_old_bubblewrap_is_not_full_isolation(tmp_path: Path) -> None:

@@ -1,6 +1,12 @@
 """The pids and memory cgroups of planner processes: found writable (`cgroup_root`), made one per
 process with its limits (`make_cgroups`), joined with the rlimits set as the process starts
-(`preexec`), and removed with whatever is left in them."""
+(`preexec`), and removed once empty, after what is left in them is killed.
+
+A cgroup's name says which process made it (`sbx-PID-START-RANDOM`, START the process's start
+time, so that a reused PID is not taken for it): `sweep_stale` removes those of processes that
+are gone (a worker killed before it could clean up), killing what they still hold, and leaves
+alone those of live processes, which may share the same cgroup root (the API and the workers
+on one machine)."""
 
 from __future__ import annotations
 
@@ -102,10 +108,67 @@ def _remove_cgroup(path: Path) -> bool:
     return True
 
 
+# A cgroup named without its owner is taken as left behind only after this long.
+UNKNOWN_OWNER_AGE_S = 600.0
+
+
+def _start_time(pid: int) -> str | None:
+    """When process `pid` started (clock ticks since boot), or None when there is none."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return stat.rpartition(")")[2].split()[19]  # the 22nd field; the name may hold spaces
+
+
+def _owner_alive(name: str) -> bool | None:
+    """Whether the process that made cgroup `name` still runs; None when the name does not
+    say (one made before names held their owner)."""
+    parts = name.split("-")
+    if len(parts) != 4 or parts[0] != "sbx" or not parts[1].isdigit():
+        return None
+    return _start_time(int(parts[1])) == parts[2]
+
+
+def sweep_stale(iso: Isolation) -> list[Path]:
+    """Remove the planner cgroups of processes that are gone, killing what is left in them;
+    the ones removed. A cgroup whose owner is unknown is removed only when empty and older
+    than `UNKNOWN_OWNER_AGE_S`."""
+    removed = []
+    for root in {iso.cgroup_pids, iso.cgroup_memory} - {None}:
+        assert root is not None
+        try:
+            children = [path for path in root.iterdir()
+                        if path.is_dir() and path.name.startswith("sbx-")]
+        except OSError:
+            continue
+        for path in children:
+            alive = _owner_alive(path.name)
+            if alive:
+                continue
+            if alive is None:
+                # Perhaps just made by a process that is about to join it: only an old one.
+                with contextlib.suppress(OSError):
+                    if time.time() - path.stat().st_mtime > UNKNOWN_OWNER_AGE_S:
+                        path.rmdir()  # the kernel refuses while it holds a process
+                gone = not path.exists()
+            else:
+                gone = _remove_cgroup(path)
+                deadline = time.monotonic() + 2.0
+                while not gone and time.monotonic() < deadline:  # killed, not yet reaped
+                    time.sleep(0.02)
+                    gone = _remove_cgroup(path)
+            if gone:
+                removed.append(path)
+    return removed
+
+
 def make_cgroups(iso: Isolation, limits: SandboxLimits) -> Cgroups:
     with _stale_lock:
         _stale_cgroups[:] = [path for path in _stale_cgroups if not _remove_cgroup(path)]
-    name = f"sbx-{uuid.uuid4().hex[:12]}"
+    start = _start_time(os.getpid())
+    owner = f"{os.getpid()}-{start}-" if start is not None else ""  # else: an unknown owner's
+    name = f"sbx-{owner}{uuid.uuid4().hex[:12]}"
     paths: list[Path] = []
     memory: Path | None = None
     if iso.cgroup_pids is not None:

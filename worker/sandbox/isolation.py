@@ -33,6 +33,7 @@ import logging
 import os
 import shutil
 import subprocess
+import threading
 
 from pydantic import ValidationError
 
@@ -50,7 +51,7 @@ from worker.sandbox.bwrap_command import (
     scratch_args,
     seccomp_args,
 )
-from worker.sandbox.cgroups import Cgroups, cgroup_root, make_cgroups, preexec
+from worker.sandbox.cgroups import Cgroups, cgroup_root, make_cgroups, preexec, sweep_stale
 from worker.sandbox.isolation_level import Isolation
 from worker.sandbox.limits import SandboxLimits
 from worker.sandbox.packages import (
@@ -65,7 +66,8 @@ from worker.sandbox.packages import (
 __all__ = ["HIDDEN_PACKAGES", "MIN_BWRAP", "NAMESPACE_ARGS", "VISIBLE_PACKAGES", "Cgroups",
            "Isolation", "SandboxLimits", "SandboxPolicyError",
            "SandboxUnavailableError", "child_paths", "command", "insecure_allowed",
-           "library_dirs", "make_cgroups", "package_dirs", "preexec", "probe", "python_path",
+           "library_dirs", "make_cgroups", "package_dirs", "preexec", "probe",
+           "probe_in_background", "python_path",
            "require_full", "scratch_args", "seed_numba_cache"]
 
 log = logging.getLogger(__name__)
@@ -80,18 +82,46 @@ class SandboxPolicyError(SandboxUnavailableError, planner_package.SandboxPolicyE
 
 
 _full_isolation: Isolation | None = None
+_probe_lock = threading.Lock()
 
 
 def probe() -> Isolation:
     """What this machine offers. A full result is kept for the process; anything less is probed
-    again at the next call (a cgroup or namespace setting may be fixed while the worker runs)."""
+    again at the next call (a cgroup or namespace setting may be fixed while the worker runs).
+    The first full result also sweeps the cgroups that processes now gone left behind."""
     global _full_isolation
     if _full_isolation is not None:
         return _full_isolation
-    iso = _probe()
-    if iso.full:
-        _full_isolation = iso
+    with _probe_lock:  # one probe at a time: a burst of uploads at start-up probes once
+        if _full_isolation is not None:
+            return _full_isolation
+        iso = _probe()
+        if iso.full:
+            swept = sweep_stale(iso)
+            if swept:
+                log.warning("removed %d planner cgroups left by processes that are gone: %s",
+                            len(swept), ", ".join(map(str, swept)))
+            _full_isolation = iso
     return iso
+
+
+def probe_in_background() -> threading.Thread:
+    """Probe (and sweep stale cgroups) in a thread as a process starts, so that the first
+    upload or run finds the result ready."""
+    thread = threading.Thread(target=_probe_quietly, name="sandbox-probe", daemon=True)
+    thread.start()
+    return thread
+
+
+def _probe_quietly() -> None:
+    try:
+        iso = probe()
+    except Exception:  # a thread's failure must not go unseen, nor stop the process
+        log.exception("probing the planner sandbox failed")
+        return
+    if not iso.full:
+        log.warning("the planner sandbox is incomplete here, uploaded planners are refused: %s",
+                    "; ".join(iso.notes))
 
 
 def _probe() -> Isolation:
