@@ -215,7 +215,8 @@ def _served(session: Session, preset: str, area: str | None, benchmark_version: 
 
 
 async def serve_leaderboard(engine: Engine, sessions: sessionmaker[Session], preset: str,
-                            area: str | None = None, *, benchmark_version: str) -> Served:
+                            area: str | None = None, *, benchmark_version: str,
+                            epoch: Callable[[], int | None] | None = None) -> Served:
     """The current leaderboard of `benchmark_version` and its body, for the API (`engine`
     names the database, `sessions` read it). The version check is shared by the requests
     waiting for it (see `_Gate`), and a stale board is recomputed once, in a thread, however
@@ -233,6 +234,9 @@ async def serve_leaderboard(engine: Engine, sessions: sessionmaker[Session], pre
         reader = store.reader
 
     def check() -> Version:
+        # With Redis, the shared results epoch (server.shared_state) instead of the aggregate.
+        if epoch is not None and (current := epoch()) is not None:
+            return current, -1, -1
         with reader.connect() as conn:
             return results_version(conn, preset)
 

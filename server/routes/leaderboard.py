@@ -77,7 +77,8 @@ async def leaderboard(
         except UnknownBenchmarkVersionError as exc:
             raise HTTPException(404, str(exc)) from None
     served = await serve_leaderboard(state.engine, sessions, preset, area,
-                                     benchmark_version=version)
+                                     benchmark_version=version,
+                                     epoch=getattr(state, "results_epoch", None))
     headers = {"ETag": served.etag, "Cache-Control": CACHE_CONTROL}
     if etag_matches(request.headers.get("if-none-match"), served.etag):
         return Response(status_code=304, headers=headers)
