@@ -146,7 +146,7 @@ def run_serve(args: argparse.Namespace) -> None:
         # the server is just closing as idle, and see it reset.
         options: dict[str, Any] = {"host": args.host, "port": args.port, "log_level": "info",
                                    "limit_concurrency": MAX_CONCURRENT_REQUESTS,
-                                   "timeout_keep_alive": 30}
+                                   "timeout_keep_alive": 30, "access_log": args.access_log}
         if api_workers == 1:
             uvicorn.run(create_app(settings), **options)
         else:

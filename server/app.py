@@ -63,6 +63,7 @@ def create_app(settings: Settings | None = None, *, sweeper: bool = True,
     app.state.engine = engine
     app.state.sessions = sessions
     app.state.read_sessions = read_sessions
+    app.state.job_reads = jobs.job_reader(read_only(engine))
     app.state.planner_check = planner_check
     app.state.check_slots = CheckSlots(settings.max_concurrent_checks)
     shared = settings.shared_redis_url
