@@ -103,7 +103,7 @@ class Deployment:
 
     def start(self, service: Service, argv: list[str], env: dict[str, str], n: int = 0,
               user: str | None = None) -> None:
-        run_as = ["runuser", "-u", user, "--"] if user else []
+        run_as = [shutil.which("runuser") or "/usr/sbin/runuser", "-u", user, "--"] if user else []
         with (self.folder / f"{service.name}-{n}.log").open("ab") as log:
             self.procs.append(subprocess.Popen([*run_as, *argv], env=env, stdout=log,
                                                stderr=subprocess.STDOUT,
@@ -192,7 +192,11 @@ def _start_service(stack: ExitStack, deployment: Deployment, service: Service) -
         assert "build" in service.spec, f"{service.name}: neither an image known here nor built"
         argv = [deployment.addresses.substitute(a, inside=service.name)
                 for a in service.command]
-        argv = ["127.0.0.1" if a == "0.0.0.0" else a for a in argv]
+        # Where it listens: this machine's loopback address and the port given to its own.
+        port = CONTAINER_PORTS.get(service.name)
+        argv = ["127.0.0.1" if a == "0.0.0.0" else
+                str(deployment.addresses.local(service.name, port))
+                if port is not None and a == str(port) else a for a in argv]
         for n in range(service.replicas):
             deployment.start(service, argv, deployment.env(service), n)
 
