@@ -44,7 +44,7 @@ from typing import Any
 import httpx
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import print_table, write_json
+from common import print_table, serve_command, write_json
 from leaderboard_page import AREAS, PLANNERS, RUNS, _port, _wait_synced, fill_load_fixture
 
 POSTGRES_ADMIN_URL = os.environ.get("FLYBO_BENCH_POSTGRES_URL",
@@ -135,7 +135,7 @@ def postgres_database() -> Iterator[str]:
 
 @contextmanager
 def serving(tmp: Path, database_url: str | None, nice: int = 0,
-            api_workers: int = 1) -> Iterator[tuple[str, int]]:
+            api_workers: int = 1, tree: Path | None = None) -> Iterator[tuple[str, int]]:
     """`flybo serve` on one pinned core (or `api_workers` processes on all); yields its base
     URL and process id once the areas are synced."""
     env = {k: v for k, v in os.environ.items() if not k.startswith("FLYBO_")}
@@ -152,10 +152,12 @@ def serving(tmp: Path, database_url: str | None, nice: int = 0,
     with open(tmp / "serve.log", "wb") as log:
         # taskset and nice exec what they run: the process id stays the server's.
         priority = ["nice", "-n", str(nice)] if nice else []
-        proc = subprocess.Popen([*priority, *pin, sys.executable, "-m",
-                                 "flybo", "serve", "--port", str(port), "--workers", "0",
-                                 "--no-viewer", "--api-workers", str(api_workers)],
-                                env=env, stdout=log, stderr=subprocess.STDOUT)
+        flybo, cwd = serve_command(tree)
+        # The code before had one API process and no --api-workers option.
+        processes = [] if tree is not None else ["--api-workers", str(api_workers)]
+        proc = subprocess.Popen([*priority, *pin, *flybo, "serve", "--port", str(port),
+                                 "--workers", "0", "--no-viewer", *processes],
+                                env=env, stdout=log, stderr=subprocess.STDOUT, cwd=cwd)
     try:
         deadline = time.monotonic() + 120
         while True:
@@ -212,6 +214,9 @@ def main() -> None:
     parser.add_argument("--api-workers", type=int, nargs="+", default=[1],
                         help="numbers of API processes to measure, in turn (default 1)")
     parser.add_argument("--connections", type=int, nargs="+", default=list(CONNECTIONS))
+    parser.add_argument("--before", type=Path, default=None,
+                        help="also measure the code in this folder first, one API process "
+                             "(`git archive COMMIT | tar -x -C DIR`)")
     args = parser.parse_args()
     if shutil.which("wrk") is None:
         raise SystemExit("wrk is missing: `make benchmark-system-deps` installs it")
@@ -228,7 +233,7 @@ def main() -> None:
             met = (r["rps"] >= TARGET_RPS and r["p99_ms"] < TARGET_P99_MS
                    if r["connections"] == 32 else None)
             errors = int(r["non_2xx"] + r["socket_errors"])
-            table.append([backend, r["api_workers"], r["query"], r["connections"],
+            table.append([backend, r["code"], r["api_workers"], r["query"], r["connections"],
                           f"{r['rps']:.0f}", f"{r['p50_ms']:.1f}", f"{r['p90_ms']:.1f}",
                           f"{r['p99_ms']:.1f}", errors, f"{r['server_cpu_ms_per_request']:.2f}",
                           f"{r['loadavg_1min']:.1f}",
@@ -238,8 +243,8 @@ def main() -> None:
         f"one API process pinned to CPU {SERVER_CPU} and wrk -t2 -d{args.duration}s to CPU "
         f"{CLIENT_CPU}, or N API processes and wrk on both"
         + (f"; server niceness {args.nice}" if args.nice else ""),
-        ["database", "API processes", "query", "conns", "req/s", "p50 ms", "p90 ms", "p99 ms",
-         "errors", "server CPU ms/req", "load",
+        ["database", "code", "API processes", "query", "conns", "req/s", "p50 ms", "p90 ms",
+         "p99 ms", "errors", "server CPU ms/req", "load",
          f">= {TARGET_RPS:.0f}/s, p99 < {TARGET_P99_MS:.0f} ms"],
         table)
     path = write_json(args.label, {
@@ -263,9 +268,14 @@ def _backend(backend: str, args: argparse.Namespace) -> list[dict[str, Any]]:
             else:
                 url = stack.enter_context(postgres_database())
                 fill_load_fixture(url)
+            if args.before is not None:
+                with serving(tmp, url, args.nice, 1, args.before) as served:
+                    rows += [{**row, "code": "before"} for row in
+                             measure(served, args.duration, args.warmup, connections, 1)]
             for count in args.api_workers:
                 with serving(tmp, url, args.nice, count) as served:
-                    rows += measure(served, args.duration, args.warmup, connections, count)
+                    rows += [{**row, "code": "now"} for row in
+                             measure(served, args.duration, args.warmup, connections, count)]
     return rows
 
 

@@ -10,7 +10,11 @@ HTTP libraries do. Everything shares the machine's two cores: the worker, the AP
 wrk. The table lists requests/s, latency percentiles, errors (non-2xx/3xx and socket errors),
 and how far the job got meanwhile.
 
-Run: `.venv/bin/python benchmarks/polling_load.py [--api-workers 1 2] [--seconds 60]`
+`--before DIR` measures the code in DIR first (an unpacked `git archive` of an earlier commit):
+its API, with one worker of this checkout beside it.
+
+Run: `.venv/bin/python benchmarks/polling_load.py [--api-workers 1 2] [--seconds 60]
+[--before DIR]`
 (needs Debian's `wrk`: `make benchmark-system-deps`). Target: 0 errors and p99 at most 300 ms.
 """
 
@@ -34,6 +38,7 @@ from common import (
     create_token,
     free_port,
     print_table,
+    serve_command,
     service_env,
     wait_healthy,
     write_json,
@@ -63,7 +68,9 @@ function done(summary, latency, requests)
       total[status] = (total[status] or 0) + count
     end
   end
-  for status, count in pairs(total) do io.write(string.format("status %%d: %%d\\n", status, count)) end
+  for status, count in pairs(total) do
+    io.write(string.format("status %%d: %%d\\n", status, count))
+  end
 end
 """
 
@@ -78,18 +85,34 @@ def _running(base: str, job_id: int, timeout_s: float = 180.0) -> None:
     raise SystemExit(f"no run of job {job_id} started within {timeout_s:g} s")
 
 
-def measure(api_workers: int, seconds: int, tmp: Path) -> dict[str, Any]:
+def _start(api_workers: int, env: dict[str, str], port: int, tmp: Path,
+           tree: Path | None) -> list[subprocess.Popen[bytes]]:
+    """`flybo serve` with one worker; for code before (`tree`), its API with this checkout's
+    worker beside it on the same data folder (that code's worker command would import this
+    checkout's installed package)."""
+    flybo, cwd = serve_command(tree)
+    options = ["--workers", "1", "--api-workers", str(api_workers)] if tree is None else \
+        ["--workers", "0"]
+    with (tmp / "serve.log").open("wb") as log:
+        procs = [subprocess.Popen([*flybo, "serve", "--port", str(port), "--no-viewer",
+                                   *options], env=env, stdout=log, stderr=subprocess.STDOUT,
+                                  cwd=cwd)]
+        if tree is not None:
+            procs.append(subprocess.Popen([*serve_command()[0], "worker"], env=env,
+                                          stdout=log, stderr=subprocess.STDOUT))
+    return procs
+
+
+def measure(api_workers: int, seconds: int, tmp: Path,
+            tree: Path | None = None) -> dict[str, Any]:
     env = service_env(tmp / "data")
     if api_workers > 1:
         env["FLYBO_REDIS_URL"] = REDIS_URL
     token = create_token(env, "load")
     port = free_port()
     base = f"http://127.0.0.1:{port}"
-    with (tmp / "serve.log").open("wb") as log:
-        server = subprocess.Popen(
-            [sys.executable, "-m", "flybo", "serve", "--port", str(port), "--workers", "1",
-             "--no-viewer", "--api-workers", str(api_workers)],
-            env=env, stdout=log, stderr=subprocess.STDOUT)
+    procs = _start(api_workers, env, port, tmp, tree)
+    server = procs[0]
     try:
         wait_healthy(base)
         job = httpx.post(f"{base}/api/v1/jobs", headers={"Authorization": f"Bearer {token}"},
@@ -109,16 +132,19 @@ def measure(api_workers: int, seconds: int, tmp: Path) -> dict[str, Any]:
         cpu = cpu_seconds(server.pid) - cpu
         after = httpx.get(f"{base}/api/v1/jobs/{job_id}", timeout=10).json()["progress"]
     finally:
-        server.terminate()
-        try:
-            server.wait(timeout=60)
-        except subprocess.TimeoutExpired:
-            server.kill()
+        for proc in procs:
+            proc.terminate()
+        for proc in procs:
+            try:
+                proc.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                proc.kill()
     result = parse_wrk(done.stdout)
     statuses = {int(code): int(count) for code, count in
                 re.findall(r"^status (\d+): (\d+)$", done.stdout, re.MULTILINE)}
-    return {"api_workers": api_workers, **result, "statuses": statuses, "loadavg_1min": load,
-            "api_cpu_s": cpu, "job_progress": [before, after], "wrk": done.stdout}
+    return {"code": "now" if tree is None else "before", "api_workers": api_workers, **result,
+            "statuses": statuses, "loadavg_1min": load, "api_cpu_s": cpu,
+            "job_progress": [before, after], "wrk": done.stdout}
 
 
 def main() -> None:
@@ -126,10 +152,16 @@ def main() -> None:
     parser.add_argument("--api-workers", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--seconds", type=int, default=60)
     parser.add_argument("--label", default="polling_load")
+    parser.add_argument("--before", type=Path, default=None,
+                        help="also measure the code in this folder first, one API process "
+                             "(`git archive COMMIT | tar -x -C DIR`)")
     args = parser.parse_args()
     if shutil.which("wrk") is None:
         raise SystemExit("wrk is missing: `make benchmark-system-deps` installs it")
     rows = []
+    if args.before is not None:
+        with tempfile.TemporaryDirectory(prefix="flybo-bench-poll-") as tmp:
+            rows.append(measure(1, args.seconds, Path(tmp), args.before))
     for count in args.api_workers:
         with tempfile.TemporaryDirectory(prefix="flybo-bench-poll-") as tmp:
             rows.append(measure(count, args.seconds, Path(tmp)))
@@ -138,15 +170,15 @@ def main() -> None:
         errors = int(r["non_2xx"] + r["socket_errors"])
         met = errors == 0 and r["p99_ms"] <= TARGET_P99_MS
         codes = ", ".join(f"{k}: {v}" for k, v in sorted(r["statuses"].items()))
-        table.append([r["api_workers"], int(r["requests"]), codes, f"{r['rps']:.0f}",
+        table.append([r["code"], r["api_workers"], int(r["requests"]), codes, f"{r['rps']:.0f}",
                       f"{r['p50_ms']:.0f}", f"{r['p90_ms']:.0f}", f"{r['p99_ms']:.0f}", errors,
                       f"{1000 * r['api_cpu_s'] / max(r['requests'], 1):.2f}",
                       f"{r['job_progress'][0]:.2f} -> {r['job_progress'][1]:.2f}",
                       f"{r['loadavg_1min']:.1f}", "met" if met else "MISSED"])
     print_table(f"{CLIENTS} clients (wrk), job + leaderboard in turn, {args.seconds} s, one "
                 "worker flying MAZE + Classic; SQLite, filesystem broker",
-                ["API processes", "requests", "statuses", "req/s", "p50 ms", "p90 ms", "p99 ms", "errors",
-                 "API CPU ms/req", "job progress", "load",
+                ["code", "API processes", "requests", "statuses", "req/s", "p50 ms", "p90 ms",
+                 "p99 ms", "errors", "API CPU ms/req", "job progress", "load",
                  f"0 errors, p99 <= {TARGET_P99_MS:.0f} ms"], table)
     path = write_json(args.label, {"clients": CLIENTS, "seconds": args.seconds,
                                    "target_p99_ms": TARGET_P99_MS, "results": rows})
