@@ -12,9 +12,9 @@ a board carries every metric the measures flag for the leaderboard (`sim.measure
 `leaderboard=True`), mean/min/max per planner and area.
 
 Every API process caches the computed boards per database and (preset, benchmark version,
-area), with their JSON bodies, under the results version of the preset. Every request checks
-that version (exact: no staleness window); concurrent API requests share one check (`_Gate`),
-so a busy endpoint costs one small query per batch of requests and serves stored bytes.
+area), with their JSON bodies, under the results version of the preset (with Redis, the results
+epoch of `server.shared_state`). Every request checks it; concurrent requests share one check
+(`_Gate`), so a busy endpoint costs one small query per batch of requests and serves bytes.
 """
 
 from __future__ import annotations
