@@ -5,8 +5,10 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 SYSTEM_LIBS := libusb-1.0-0 libgl1 libegl1 libgomp1 bubblewrap
 # Browser tests drive Debian's Chromium through Playwright (never a downloaded browser); the
-# production image's sandbox is tested in a podman container (runc: crun refuses hybrid cgroups).
-TEST_SYSTEM_PACKAGES := chromium podman runc
+# production image's sandbox is tested in a podman container (runc: crun refuses hybrid cgroups);
+# the multi-host test makes network namespaces with iproute2 and its own PostgreSQL cluster and
+# Redis server in them.
+TEST_SYSTEM_PACKAGES := chromium podman runc iproute2 postgresql redis-server
 # The HTTP load generator of benchmarks/leaderboard_throughput.py (benchmarks only).
 BENCHMARK_SYSTEM_PACKAGES := wrk
 

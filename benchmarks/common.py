@@ -77,3 +77,13 @@ def wait_healthy(base: str, timeout_s: float = 120.0) -> float:
         if time.monotonic() - t0 > timeout_s:
             raise SystemExit(f"flybo serve at {base} did not answer within {timeout_s:g} s")
         time.sleep(0.2)
+
+
+def serve_command(tree: Path | None = None) -> tuple[list[str], Path | None]:
+    """The command that runs `flybo` (and the folder to run it in): this checkout's, or the
+    code of another `tree` (an unpacked `git archive` of an earlier commit, to measure before
+    and after in one run). Another tree's code is imported from its folder, bypassing the
+    installed distribution's check (which would name the folder a clash)."""
+    if tree is None:
+        return [sys.executable, "-m", "flybo"], None
+    return [sys.executable, "-c", "from flybo.cli import main; main()"], tree

@@ -12,15 +12,22 @@ The machine has two cores: the server is pinned to one (`taskset -c 0`) and wrk 
 (`taskset -c 1`), so the client does not take the server's core. Other work on the machine
 still competes for both; the load average is recorded beside each measurement.
 
-Run: `.venv/bin/python benchmarks/leaderboard_throughput.py [--duration 20] [--only sqlite]`
-(needs Debian's `wrk`: `make benchmark-system-deps`). PostgreSQL: `FLYBO_BENCH_POSTGRES_URL`
-(default `postgresql+psycopg://postgres@127.0.0.1:5432/test`, used to create and drop the
-fresh database). Target: at least 500 requests/s with p99 under 100 ms at 32 connections.
+`--api-workers 1 2` measures each number of API processes side by side (`flybo serve
+--api-workers N`; with more than one, Redis holds what they share, `FLYBO_BENCH_REDIS_URL`).
+One process is pinned to CPU 0 as above; N processes run unpinned on both cores, wrk with them
+(the machine has no third core to give it), and the CPU per request sums all of them.
+
+Run: `.venv/bin/python benchmarks/leaderboard_throughput.py [--duration 20] [--only sqlite]
+[--api-workers 1 2] [--connections 32]` (needs Debian's `wrk`: `make benchmark-system-deps`).
+PostgreSQL: `FLYBO_BENCH_POSTGRES_URL` (default `postgresql+psycopg://postgres@127.0.0.1:5432/
+test`, used to create and drop the fresh database). Targets at 32 connections: at least 2,000
+requests/s with p99 under 50 ms (before: 500 requests/s, p99 under 100 ms).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import re
 import shutil
@@ -37,14 +44,15 @@ from typing import Any
 import httpx
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import print_table, write_json
+from common import print_table, serve_command, write_json
 from leaderboard_page import AREAS, PLANNERS, RUNS, _port, _wait_synced, fill_load_fixture
 
 POSTGRES_ADMIN_URL = os.environ.get("FLYBO_BENCH_POSTGRES_URL",
                                     "postgresql+psycopg://postgres@127.0.0.1:5432/test")
+REDIS_URL = os.environ.get("FLYBO_BENCH_REDIS_URL", "redis://127.0.0.1:6379/14")
 CONNECTIONS = (1, 8, 32)
-TARGET_RPS = 500.0
-TARGET_P99_MS = 100.0
+TARGET_RPS = 2000.0
+TARGET_P99_MS = 50.0
 SERVER_CPU = "0"
 CLIENT_CPU = "1"
 _UNITS_MS = {"us": 1e-3, "ms": 1.0, "s": 1000.0, "m": 60_000.0}
@@ -73,17 +81,28 @@ def parse_wrk(text: str) -> dict[str, float]:
 
 
 def cpu_seconds(pid: int) -> float:
-    """User + system CPU time of a process so far (Linux /proc)."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    """User + system CPU time of a process and its children alive now (the API processes of
+    `--api-workers N`) so far (Linux /proc)."""
+    total = 0.0
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(entry.name) == pid or int(fields[1]) == pid:
+            total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    return total
 
 
-def run_wrk(url: str, connections: int, duration_s: int, server_pid: int) -> dict[str, float]:
+def run_wrk(url: str, connections: int, duration_s: int, server_pid: int,
+            pinned: bool = True) -> dict[str, float]:
     """One wrk run; also the server's CPU seconds per 1000 requests, which the other work on
     the machine does not change (unlike requests/s)."""
     threads = min(2, connections)
-    cmd = ["taskset", "-c", CLIENT_CPU, "wrk", f"-c{connections}", f"-t{threads}",
-           f"-d{duration_s}s", "--latency", url]
+    cmd = [*(["taskset", "-c", CLIENT_CPU] if pinned else []), "wrk", f"-c{connections}",
+           f"-t{threads}", f"-d{duration_s}s", "--latency", url]
     load = os.getloadavg()[0]
     cpu = cpu_seconds(server_pid)
     done = subprocess.run(cmd, capture_output=True, text=True, check=True)
@@ -115,24 +134,30 @@ def postgres_database() -> Iterator[str]:
 
 
 @contextmanager
-def serving(tmp: Path, database_url: str | None, nice: int = 0) -> Iterator[tuple[str, int]]:
-    """`flybo serve` on one pinned core; yields its base URL and process id once the areas
-    are synced."""
+def serving(tmp: Path, database_url: str | None, nice: int = 0,
+            api_workers: int = 1, tree: Path | None = None) -> Iterator[tuple[str, int]]:
+    """`flybo serve` on one pinned core (or `api_workers` processes on all); yields its base
+    URL and process id once the areas are synced."""
     env = {k: v for k, v in os.environ.items() if not k.startswith("FLYBO_")}
     env["FLYBO_DATA_DIR"] = str(tmp)
     if "FLYBO_CACHE_DIR" in os.environ:
         env["FLYBO_CACHE_DIR"] = os.environ["FLYBO_CACHE_DIR"]
     if database_url is not None:
         env["FLYBO_DATABASE_URL"] = database_url
+    if api_workers > 1:
+        env["FLYBO_REDIS_URL"] = REDIS_URL
+    pin = ["taskset", "-c", SERVER_CPU] if api_workers == 1 else []
     port = _port()
     base = f"http://127.0.0.1:{port}"
     with open(tmp / "serve.log", "wb") as log:
         # taskset and nice exec what they run: the process id stays the server's.
         priority = ["nice", "-n", str(nice)] if nice else []
-        proc = subprocess.Popen([*priority, "taskset", "-c", SERVER_CPU, sys.executable, "-m",
-                                 "flybo", "serve", "--port", str(port), "--workers", "0",
-                                 "--no-viewer"],
-                                env=env, stdout=log, stderr=subprocess.STDOUT)
+        flybo, cwd = serve_command(tree)
+        # The code before had one API process and no --api-workers option.
+        processes = [] if tree is not None else ["--api-workers", str(api_workers)]
+        proc = subprocess.Popen([*priority, *pin, *flybo, "serve", "--port", str(port),
+                                 "--workers", "0", "--no-viewer", *processes],
+                                env=env, stdout=log, stderr=subprocess.STDOUT, cwd=cwd)
     try:
         deadline = time.monotonic() + 120
         while True:
@@ -157,7 +182,8 @@ def serving(tmp: Path, database_url: str | None, nice: int = 0) -> Iterator[tupl
             proc.kill()
 
 
-def measure(served: tuple[str, int], duration_s: int, warmup_s: int) -> list[dict[str, Any]]:
+def measure(served: tuple[str, int], duration_s: int, warmup_s: int,
+            connections: tuple[int, ...], api_workers: int) -> list[dict[str, Any]]:
     base, pid = served
     rows: list[dict[str, Any]] = []
     for query in ("", "?area=warehouse"):
@@ -165,11 +191,13 @@ def measure(served: tuple[str, int], duration_s: int, warmup_s: int) -> list[dic
         board = httpx.get(url, timeout=30)
         board.raise_for_status()
         entries = len(board.json()["entries"])
-        run_wrk(url, 32, warmup_s, pid)  # warm-up: caches, pools, connections; not counted
-        for connections in CONNECTIONS:
-            result = run_wrk(url, connections, duration_s, pid)
-            rows.append({"query": query or "(all areas)", "connections": connections,
-                         "entries": entries, "bytes": len(board.content), **result})
+        pinned = api_workers == 1
+        run_wrk(url, 32, warmup_s, pid, pinned)  # warm-up: caches, pools, connections
+        for count in connections:
+            result = run_wrk(url, count, duration_s, pid, pinned)
+            rows.append({"query": query or "(all areas)", "connections": count,
+                         "api_workers": api_workers, "entries": entries,
+                         "bytes": len(board.content), **result})
     return rows
 
 
@@ -183,6 +211,12 @@ def main() -> None:
                              "ahead of other work on its core; needs root)")
     parser.add_argument("--label", default="leaderboard_throughput",
                         help="name of the JSON file under benchmarks/results")
+    parser.add_argument("--api-workers", type=int, nargs="+", default=[1],
+                        help="numbers of API processes to measure, in turn (default 1)")
+    parser.add_argument("--connections", type=int, nargs="+", default=list(CONNECTIONS))
+    parser.add_argument("--before", type=Path, default=None,
+                        help="also measure the code in this folder first, one API process "
+                             "(`git archive COMMIT | tar -x -C DIR`)")
     args = parser.parse_args()
     if shutil.which("wrk") is None:
         raise SystemExit("wrk is missing: `make benchmark-system-deps` installs it")
@@ -192,41 +226,57 @@ def main() -> None:
     for backend in ("sqlite", "postgresql"):
         if args.only not in (None, backend):
             continue
-        with tempfile.TemporaryDirectory(prefix="flybo-bench-lb-") as tmp_name:
-            tmp = Path(tmp_name)
-            if backend == "sqlite":
-                fill_load_fixture(f"sqlite:///{tmp / 'flybo.sqlite'}")
-                with serving(tmp, None, args.nice) as served:
-                    results[backend] = measure(served, args.duration, args.warmup)
-            else:
-                with postgres_database() as url:
-                    fill_load_fixture(url)
-                    with serving(tmp, url, args.nice) as served:
-                        results[backend] = measure(served, args.duration, args.warmup)
+        results[backend] = _backend(backend, args)
     table = []
     for backend, rows in results.items():
         for r in rows:
             met = (r["rps"] >= TARGET_RPS and r["p99_ms"] < TARGET_P99_MS
                    if r["connections"] == 32 else None)
             errors = int(r["non_2xx"] + r["socket_errors"])
-            table.append([backend, r["query"], r["connections"], f"{r['rps']:.0f}",
-                          f"{r['p50_ms']:.1f}", f"{r['p90_ms']:.1f}", f"{r['p99_ms']:.1f}",
-                          errors, f"{r['server_cpu_ms_per_request']:.2f}",
+            table.append([backend, r["code"], r["api_workers"], r["query"], r["connections"],
+                          f"{r['rps']:.0f}", f"{r['p50_ms']:.1f}", f"{r['p90_ms']:.1f}",
+                          f"{r['p99_ms']:.1f}", errors, f"{r['server_cpu_ms_per_request']:.2f}",
                           f"{r['loadavg_1min']:.1f}",
                           "" if met is None else ("met" if met else "MISSED")])
     print_table(
         f"GET /api/v1/leaderboard, {PLANNERS} planners x {len(AREAS)} areas x {RUNS} runs; "
-        f"one API process pinned to CPU {SERVER_CPU}, wrk -t2 -d{args.duration}s pinned to "
-        f"CPU {CLIENT_CPU}" + (f"; server niceness {args.nice}" if args.nice else ""),
-        ["database", "query", "conns", "req/s", "p50 ms", "p90 ms", "p99 ms", "errors",
-         "server CPU ms/req", "load", f">= {TARGET_RPS:.0f}/s, p99 < {TARGET_P99_MS:.0f} ms"],
+        f"one API process pinned to CPU {SERVER_CPU} and wrk -t2 -d{args.duration}s to CPU "
+        f"{CLIENT_CPU}, or N API processes and wrk on both"
+        + (f"; server niceness {args.nice}" if args.nice else ""),
+        ["database", "code", "API processes", "query", "conns", "req/s", "p50 ms", "p90 ms",
+         "p99 ms", "errors", "server CPU ms/req", "load",
+         f">= {TARGET_RPS:.0f}/s, p99 < {TARGET_P99_MS:.0f} ms"],
         table)
     path = write_json(args.label, {
         "planners": PLANNERS, "areas": len(AREAS), "runs_per_area": RUNS,
         "server_cpu": SERVER_CPU, "client_cpu": CLIENT_CPU, "duration_s": args.duration,
         "server_niceness": args.nice, "target_rps": TARGET_RPS, "target_p99_ms": TARGET_P99_MS,
-        "results": results})
+        "api_workers": args.api_workers, "results": results})
     print(f"\nwrote {path}")
+
+
+def _backend(backend: str, args: argparse.Namespace) -> list[dict[str, Any]]:
+    """Every set-up of `args.api_workers` on one fresh database of `backend`."""
+    rows: list[dict[str, Any]] = []
+    connections = tuple(args.connections)
+    with tempfile.TemporaryDirectory(prefix="flybo-bench-lb-") as tmp_name:
+        tmp = Path(tmp_name)
+        with contextlib.ExitStack() as stack:
+            if backend == "sqlite":
+                url = None
+                fill_load_fixture(f"sqlite:///{tmp / 'flybo.sqlite'}")
+            else:
+                url = stack.enter_context(postgres_database())
+                fill_load_fixture(url)
+            if args.before is not None:
+                with serving(tmp, url, args.nice, 1, args.before) as served:
+                    rows += [{**row, "code": "before"} for row in
+                             measure(served, args.duration, args.warmup, connections, 1)]
+            for count in args.api_workers:
+                with serving(tmp, url, args.nice, count) as served:
+                    rows += [{**row, "code": "now"} for row in
+                             measure(served, args.duration, args.warmup, connections, count)]
+    return rows
 
 
 if __name__ == "__main__":

@@ -115,6 +115,7 @@ def run_serve(args: argparse.Namespace) -> None:
     if not 0 < args.port < 65536:
         raise CliError(f"--port must be 1-65535, got {args.port}")
     settings = cli_settings()
+    api_workers = api_process_count(settings, args.api_workers)
     factory = migrated(settings)
     load_shipped_baselines(factory)
     try:
@@ -138,18 +139,43 @@ def run_serve(args: argparse.Namespace) -> None:
     try:
         if args.demo:
             _demo(factory, settings, url)
-        print(f"FLYBO is serving at {url}/  (API docs: {url}/docs; {len(workers)} worker(s); "
+        print(f"FLYBO is serving at {url}/  (API docs: {url}/docs; {api_workers} API "
+              f"process(es), {len(workers)} worker(s); "
               f"data in {settings.resolved_data_dir}"
               + (f"; 3D replay at {viewer.url}" if viewer is not None else "") + ")",
               flush=True)
         # Keep-alive longer than uvicorn's 5 s: under load a client may send on a connection
         # the server is just closing as idle, and see it reset.
-        uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level="info",
-                    limit_concurrency=MAX_CONCURRENT_REQUESTS, timeout_keep_alive=30)
+        options: dict[str, Any] = {"host": args.host, "port": args.port, "log_level": "info",
+                                   "limit_concurrency": MAX_CONCURRENT_REQUESTS,
+                                   "timeout_keep_alive": 30, "access_log": args.access_log}
+        if api_workers == 1:
+            uvicorn.run(create_app(settings), **options)
+        else:
+            # Each process builds the app from the same environment (the viewer's address
+            # included); they share the listening socket, the kernel spreads connections.
+            if viewer is not None and "FLYBO_VIEWER_URL" not in os.environ:
+                os.environ["FLYBO_VIEWER_URL"] = viewer.url
+            uvicorn.run("flybo.app:create_app", factory=True, workers=api_workers, **options)
     finally:
         if viewer is not None:
             viewer.stop()
         stop_workers(workers)
+
+
+def api_process_count(settings: Settings, asked: int | None) -> int:
+    """The API processes `flybo serve` runs: `asked`, else the settings' default for the usable
+    cores. More than one needs Redis: rate limits kept per process would each allow the full
+    rate, so N processes would let N times the limit through."""
+    count = asked if asked is not None else settings.default_api_workers(
+        len(os.sched_getaffinity(0)))
+    if not 1 <= count <= 64:
+        raise CliError(f"--api-workers must be 1-64, got {count}")
+    if count > 1 and settings.shared_redis_url is None:
+        raise CliError(f"--api-workers {count} needs Redis for the rate limits the API processes "
+                       "share: set FLYBO_REDIS_URL (or a redis:// FLYBO_BROKER_URL), or serve "
+                       "with --api-workers 1")
+    return count
 
 
 def _demo(factory: sessionmaker[Session], settings: Settings, url: str) -> None:

@@ -39,6 +39,13 @@ def _add_local_commands(sub: Any) -> None:
     serve.add_argument("--port", type=int, default=8000)
     serve.add_argument("--workers", type=int, default=1,
                        help="worker processes to start beside the API (default 1; 0: none)")
+    serve.add_argument("--api-workers", type=int, default=None, metavar="N",
+                       help="API processes sharing the port (default FLYBO_API_WORKERS, else "
+                            "one per usable core in production with Redis, else 1; more than "
+                            "1 needs Redis, FLYBO_REDIS_URL or a redis:// broker)")
+    serve.add_argument("--access-log", action="store_true",
+                       help="log every request (off by default: under load the log line costs "
+                            "more than a cached answer)")
     _threads_option(serve, "each worker process")
     serve.add_argument("--demo", action="store_true",
                        help="create a 'demo' user and submit a short MAZE + Classic job")

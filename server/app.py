@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import gc
 import logging
 import threading
@@ -20,7 +21,7 @@ import anyio.to_thread
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
-from sqlalchemy import Engine
+from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
@@ -29,9 +30,11 @@ from server.catalog import sync_builtin_planners
 from server.db import make_engine, make_session_factory, read_only, session_scope
 from server.middleware import install_middleware
 from server.migrate import upgrade
+from server.models import PlannerRow, Run, RunState
 from server.planner_package import CheckSlots, PlannerCheck
 from server.routes import areas, curves, groups, health, jobs, leaderboard, planners, runs
 from server.settings import Settings, load_settings
+from server.shared_state import EpochNet, read_results_epoch
 from server.sweeper import sweep
 
 log = logging.getLogger(__name__)
@@ -61,8 +64,11 @@ def create_app(settings: Settings | None = None, *, sweeper: bool = True,
     app.state.engine = engine
     app.state.sessions = sessions
     app.state.read_sessions = read_sessions
+    app.state.job_reads = jobs.job_reader(read_only(engine))
     app.state.planner_check = planner_check
     app.state.check_slots = CheckSlots(settings.max_concurrent_checks)
+    shared = settings.shared_redis_url
+    app.state.results_epoch = functools.partial(read_results_epoch, shared) if shared else None
     app.state.benchmark_version = benchmark_version if isinstance(benchmark_version, str) \
         else None
     app.include_router(health.router)
@@ -133,12 +139,27 @@ def _sync_areas(db_url: str, sessions: sessionmaker[Session]) -> None:
 
 
 async def _sweep_forever(sessions: sessionmaker[Session], settings: Settings) -> None:
+    shared = settings.shared_redis_url
+    net = EpochNet(shared) if shared else None
     while True:
         await asyncio.sleep(settings.sweep_interval_s)
         try:
             await asyncio.to_thread(sweep, sessions, settings)
+            if net is not None:
+                net.check(await asyncio.to_thread(_results_snapshot, sessions))
         except Exception:
             log.exception("sweep failed")
+
+
+def _results_snapshot(sessions: sessionmaker[Session]) -> tuple[int, int, int]:
+    """What the leaderboards are computed from, in brief: succeeded runs (count, highest id)
+    and planners."""
+    with sessions() as session:
+        row = session.execute(select(
+            func.count(Run.id), func.coalesce(func.max(Run.id), 0),
+            select(func.count(PlannerRow.id)).scalar_subquery())
+            .where(Run.status == RunState.SUCCEEDED.value)).one()
+    return int(row[0]), int(row[1]), int(row[2] or 0)
 
 
 def _install_error_handlers(app: FastAPI) -> None:

@@ -104,6 +104,10 @@ def check_quotas(session: Session, settings: Settings, user: User, new_runs: int
     platform reason do not count."""
     if user.is_admin:
         return
+    # One check at a time per user, whichever API process serves it: two concurrent requests
+    # must not both fit under a quota they exceed together. (SQLite's writers are serialized
+    # already; PostgreSQL holds the user's row until the job is committed.)
+    session.execute(select(User.id).where(User.id == user.id).with_for_update())
     if settings.quota_jobs_per_day:
         platform_only = ~exists().where(
             and_(Run.job_id == Job.id,

@@ -14,9 +14,9 @@ bootstrap 95 % interval; planners whose intervals cannot be told apart share a r
 (`server.board_statistics`, `docs/statistics.md`).
 
 Every API process caches the computed boards per database and (preset, benchmark version,
-area), with their JSON bodies, under the results version of the preset. Every request checks
-that version (exact: no staleness window); concurrent API requests share one check (`_Gate`),
-so a busy endpoint costs one small query per batch of requests and serves stored bytes.
+area), with their JSON bodies, under the results version of the preset (with Redis, the results
+epoch of `server.shared_state`). Every request checks it; concurrent requests share one check
+(`_Gate`), so a busy endpoint costs one small query per batch of requests and serves bytes.
 """
 
 from __future__ import annotations
@@ -212,7 +212,8 @@ def _served(session: Session, preset: str, area: str | None, benchmark_version: 
 
 
 async def serve_leaderboard(engine: Engine, sessions: sessionmaker[Session], preset: str,
-                            area: str | None = None, *, benchmark_version: str) -> Served:
+                            area: str | None = None, *, benchmark_version: str,
+                            epoch: Callable[[], int | None] | None = None) -> Served:
     """The current leaderboard of `benchmark_version` and its body, for the API (`engine`
     names the database, `sessions` read it). The version check is shared by the requests
     waiting for it (see `_Gate`), and a stale board is recomputed once, in a thread, however
@@ -230,6 +231,9 @@ async def serve_leaderboard(engine: Engine, sessions: sessionmaker[Session], pre
         reader = store.reader
 
     def check() -> Version:
+        # With Redis, the shared results epoch (server.shared_state) instead of the aggregate.
+        if epoch is not None and (current := epoch()) is not None:
+            return current, -1, -1
         with reader.connect() as conn:
             return results_version(conn, preset)
 

@@ -1,18 +1,16 @@
 """Cross-cutting HTTP protections: security headers, CORS and rate limits.
 
-Rate limits are token buckets per client (the bearer token's hash, else the address), kept in
-the API process's memory: with several API processes each enforces its own share. They apply to
-requests that change something and to failed authentications; reads are not limited, so that
-pages and progress polling stay cheap.
+Rate limits are token buckets per client (the bearer token's hash, else the address), held in
+Redis when it is configured, so that all API processes enforce one limit per client, and in the
+process's memory otherwise (`server.shared_state`). They apply to requests that change
+something and to failed authentications; reads are not limited, so that pages and progress
+polling stay cheap.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import threading
-import time
-from dataclasses import dataclass
 from typing import Any
 
 from fastapi import FastAPI
@@ -20,6 +18,7 @@ from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import JSONResponse
 
 from server.settings import Settings
+from server.shared_state import make_limiter
 
 MUTATING = {"POST", "PUT", "PATCH", "DELETE"}
 SECURITY_HEADERS = {
@@ -31,38 +30,6 @@ SECURITY_HEADERS = {
 _SECURITY_RAW = [(k.lower().encode(), v.encode()) for k, v in SECURITY_HEADERS.items()]
 
 
-@dataclass
-class _Bucket:
-    tokens: float
-    updated: float
-
-
-class RateLimiter:
-    """`rate_per_minute` requests per key, with bursts up to `burst`."""
-
-    def __init__(self, rate_per_minute: float, burst: int) -> None:
-        self.rate = rate_per_minute / 60.0
-        self.burst = float(burst)
-        self.buckets: dict[str, _Bucket] = {}
-        self.lock = threading.Lock()
-
-    def allow(self, key: str) -> float:
-        """0 if allowed now, else the seconds to wait."""
-        now = time.monotonic()
-        with self.lock:
-            bucket = self.buckets.get(key)
-            if bucket is None:
-                if len(self.buckets) > 100_000:  # forget idle clients rather than grow
-                    self.buckets.clear()
-                bucket = self.buckets[key] = _Bucket(self.burst, now)
-            bucket.tokens = min(self.burst, bucket.tokens + (now - bucket.updated) * self.rate)
-            bucket.updated = now
-            if bucket.tokens >= 1.0:
-                bucket.tokens -= 1.0
-                return 0.0
-            return (1.0 - bucket.tokens) / self.rate
-
-
 class Protect:
     """Security headers on every answer, and the rate limits (a plain ASGI middleware: the
     decorator form costs a task and a stream per request)."""
@@ -70,10 +37,13 @@ class Protect:
     def __init__(self, app: Any, settings: Settings) -> None:
         self.app = app
         self.settings = settings
-        self.writes = RateLimiter(settings.rate_limit_writes_per_minute,
-                                  settings.rate_limit_burst)
-        self.failures = RateLimiter(settings.rate_limit_auth_failures_per_minute,
-                                    settings.rate_limit_burst)
+        shared = settings.shared_redis_url
+        self.writes = make_limiter(shared, "writes", settings.rate_limit_writes_per_minute,
+                                   settings.rate_limit_burst)
+        self.failures = make_limiter(shared, "auth-failures",
+                                     settings.rate_limit_auth_failures_per_minute,
+                                     settings.rate_limit_burst)
+        self.local_failures = shared is None
 
     async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
         if scope["type"] != "http":
@@ -81,7 +51,7 @@ class Protect:
             return
         client = scope.get("client")
         host = "a:" + (client[0] if client else "unknown")
-        refused = self._refusal(scope, host)
+        refused = await self._refusal(scope, host)
         if refused is not None:
             await refused(scope, receive, send)
             return
@@ -90,7 +60,7 @@ class Protect:
         async def send_with_headers(message: Any) -> None:
             if message["type"] == "http.response.start":
                 if message["status"] == 401:
-                    failures.allow(host)
+                    await failures.wait(host)
                 headers = message.get("headers", [])
                 present = {k.lower() for k, _ in headers}
                 extra = [kv for kv in _SECURITY_RAW if kv[0] not in present]
@@ -99,18 +69,23 @@ class Protect:
 
         await self.app(scope, receive, send_with_headers)
 
-    def _refusal(self, scope: Any, host: str) -> JSONResponse | None:
+    async def _refusal(self, scope: Any, host: str) -> JSONResponse | None:
+        mutating = scope["method"] in MUTATING
+        if not mutating and not self.local_failures:
+            # Reads stay free of a Redis round trip; a client that keeps failing to
+            # authenticate is stopped at its next write, or at its next read that needs a token.
+            headers = dict(scope.get("headers") or [])
+            if b"authorization" not in headers:
+                return None
         # A client that keeps failing to authenticate is slowed down, whatever it sends.
-        bucket = self.failures.buckets.get(host)
-        if bucket is not None and bucket.tokens < 1.0:
-            wait = self.failures.allow(host)
-            if wait > 0:
-                return _too_many(wait, "too many failed authentications")
-        if scope["method"] in MUTATING and self.settings.rate_limit_writes_per_minute > 0:
+        wait = await self.failures.wait(host, consume=False)
+        if wait > 0:
+            return _too_many(wait, "too many failed authentications")
+        if mutating and self.settings.rate_limit_writes_per_minute > 0:
             headers = dict(scope.get("headers") or [])
             auth = headers.get(b"authorization", b"")
             key = ("t:" + hashlib.sha256(auth).hexdigest()[:32]) if auth else host
-            wait = self.writes.allow(key)
+            wait = await self.writes.wait(key)
             if wait > 0:
                 return _too_many(wait, "too many requests that change data")
         return None

@@ -69,6 +69,12 @@ class Settings(BaseSettings):
         default=None, description="file:///folder or s3://bucket/prefix; default data_dir/artifacts"
     )
     s3_endpoint_url: str | None = None
+    redis_url: str | None = Field(
+        default=None, description="Redis for what API processes share (rate limits, the "
+        "leaderboard cache's version); default the broker's URL when it is a Redis one")
+    api_workers: int | None = Field(
+        default=None, ge=1, le=64, description="API processes of `flybo serve`; default the "
+        "usable cores in production (with Redis), else 1")
     secret_key: str = Field(default=DEVELOPMENT_SECRET, description="keys the token hashes")
 
     # Uploads.
@@ -173,6 +179,25 @@ class Settings(BaseSettings):
         if self.artifact_url:
             return self.artifact_url
         return self.artifacts_dir.as_uri()
+
+    @property
+    def shared_redis_url(self) -> str | None:
+        """The Redis that holds what the API processes share, or None: then each process
+        keeps its own (the embedded default, one API process)."""
+        if self.redis_url:
+            return self.redis_url
+        if self.broker_url and self.broker_url.startswith(("redis://", "rediss://")):
+            return self.broker_url
+        return None
+
+    def default_api_workers(self, usable_cores: int) -> int:
+        """API processes when `--api-workers` is not given: one per core in production when
+        Redis holds the shared counters; one otherwise (see `flybo serve`)."""
+        if self.api_workers is not None:
+            return self.api_workers
+        if self.environment == "production" and self.shared_redis_url is not None:
+            return max(1, usable_cores)
+        return 1
 
     @property
     def max_area_upload_bytes(self) -> int:

@@ -40,6 +40,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from server.models import FailureKind, RunState
 from server.planner_package import read_stored_package
 from server.settings import Settings
+from server.shared_state import bump_results_epoch
 from server.storage import ArtifactStore, ArtifactStoreError, StoredArtifact, settings_store
 from worker.claims import Claim, claim, finish, save_tail, sessions_for, worker_name
 from worker.heartbeat import LOG_TAIL_LINES, Heartbeat, RunAbortedError, RunLog
@@ -123,6 +124,8 @@ def _fly_and_store(factory: sessionmaker[Session], settings: Settings, held: Cla
         rows=lambda: result_rows(held.run_id, result, flown.area.plateau_s, flown.stored,
                                  flown.record),
     )
+    if done and not failed and settings.shared_redis_url:
+        bump_results_epoch(settings.shared_redis_url)  # the API processes' boards are stale
     return result.status.value if done else "lost its claim"
 
 

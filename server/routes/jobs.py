@@ -1,20 +1,23 @@
 """Jobs: a planner on some areas, several seeded runs each.
 
-`GET /jobs/{id}` is what clients poll: it is read with one Core query (`server.jobs.read_job`)
-and carries a strong ETag (a hash of the body), so that a client sending it back in
-If-None-Match gets 304 without a body while nothing changed, and `Retry-After` as a polling
-hint while the job is queued or running.
+`GET /jobs/{id}` is what clients poll: it is read with one Core query (`server.jobs.read_job`),
+shared by the concurrent polls of the same job (`server.coalesce`), and carries a strong ETag
+(a hash of the body), so that a client sending it back in If-None-Match gets 304 without a
+body while nothing changed, and `Retry-After` as a polling hint while the job is queued or
+running.
 """
 
 from __future__ import annotations
 
 import hashlib
+from dataclasses import dataclass
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Header, HTTPException, Query, Response
-from sqlalchemy import func, select
+from fastapi import APIRouter, Header, HTTPException, Query, Request, Response
+from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import selectinload
 
+from server.coalesce import Coalesced
 from server.deps import IdPath, SessionDep, SettingsDep, UserDep
 from server.jobs import cancel_job, create_job, job_out, may_manage, read_job, rerun_job
 from server.models import AreaRow, Job, PlannerRow, Run, RunState, User
@@ -94,27 +97,50 @@ def job_etag(body: bytes) -> str:
     return '"' + hashlib.sha256(body).hexdigest()[:32] + '"'
 
 
+@dataclass(frozen=True)
+class PolledJob:
+    """`GET /jobs/{id}`'s answer: the body, its ETag, and whether the job is final."""
+
+    body: bytes
+    etag: str
+    final: bool
+
+
+def job_reader(engine: Engine) -> Coalesced[int, PolledJob | None]:
+    """The polled answers of an app, read on `engine` (a read-only one), one query per batch
+    of concurrent requests for the same job (`server.coalesce`)."""
+
+    def read(job_id: int) -> PolledJob | None:
+        with engine.connect() as conn:
+            job = read_job(conn, job_id)
+        if job is None:
+            return None
+        # Serialized as FastAPI would for `response_model=JobOut`, so the bytes hashed are
+        # the bytes sent.
+        body = job.model_dump_json().encode()
+        return PolledJob(body, job_etag(body), RunState(job.status).final)
+
+    return Coalesced(read)
+
+
 @router.get("/{job_id}", response_model=JobOut,
             responses={**_ERRORS,
                        304: {"description": "unchanged since the ETag sent in If-None-Match"}})
-def get_job(
+async def get_job(
+    request: Request,
     job_id: IdPath,
-    session: SessionDep,
     if_none_match: Annotated[str | None, Header(max_length=1024)] = None,
 ) -> Response:
-    job = read_job(session.connection(), job_id)
+    # Async, without a session of its own: concurrent polls of one job share one read.
+    job: PolledJob | None = await request.app.state.job_reads.get(job_id)
     if job is None:
         raise HTTPException(404, f"no job with id {job_id}")
-    # Serialized as FastAPI would for `response_model=JobOut`, so the bytes hashed are the
-    # bytes sent.
-    body = job.model_dump_json().encode()
-    etag = job_etag(body)
-    headers = {"ETag": etag, "Cache-Control": CACHE_CONTROL}
-    if not RunState(job.status).final:
+    headers = {"ETag": job.etag, "Cache-Control": CACHE_CONTROL}
+    if not job.final:
         headers["Retry-After"] = str(POLL_AFTER_S)
-    if etag_matches(if_none_match, etag):
+    if etag_matches(if_none_match, job.etag):
         return Response(status_code=304, headers=headers)
-    return Response(body, media_type="application/json", headers=headers)
+    return Response(job.body, media_type="application/json", headers=headers)
 
 
 @router.post("/{job_id}/cancel", response_model=JobOut,
