@@ -1,0 +1,274 @@
+"""FALCON's connectivity-aware space decomposition (Zhang et al., T-RO 2024, Sec. IV; the public
+code's `exploration_preprocessing/src/hierarchical_grid.cpp`), on the framework's map.
+
+- **Cells**: a uniform grid of `cell_size_m` squares over the area (one layer of the area's full
+  height for flat areas, the code's 2D grid; otherwise 2, 3 or 4 layers as the code splits
+  boxes under 5, 10 and 20 m).
+- **Zones**: in every cell, the connected components (26-connected, on a grid coarser by
+  `ccl_step` voxels) of traversable space (free zones) and of unknown space (unknown zones).
+  A coarse cell is free where any of its voxels is traversable and unknown where all are. Free
+  zones need at least `min_free_cells` coarse cells, unknown zones `min_unknown_fraction` of the
+  cell's coarse cells (`hgrid/min_unknown_num_scale`). Each zone's centre is the mean of its
+  coarse cells, moved to the nearest of them (the code's nearest-neighbour snap).
+- **Connectivity graph**: zones are nodes; free zones of adjacent cells whose coarse cells touch
+  across the shared face are joined (the code's FREE edges), so are unknown zones (UNKNOWN
+  edges), and a free zone joins the unknown zones of its own cell that lie within the
+  vehicle's clearance of it (PORTAL edges; traversable space keeps that clearance from unknown
+  space). Edge lengths are the distances between the zones' centres. Unknown zones in a
+  connected part of the graph without a free zone are holes the vehicle cannot reach and are
+  left out (the code's `findDisconnectedNodes`).
+
+A cell is labelled again only when its coarse free and unknown cells changed (the code updates
+the cells inside the map's updated box).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy import ndimage, sparse
+from scipy.sparse import csgraph
+
+from planners.search import BoolGrid, IndexArray
+from sim.map_view import MapView
+from sim.occupancy import VoxelState
+
+FloatArray = npt.NDArray[np.float64]
+
+_CONNECT_26 = np.ones((3, 3, 3), dtype=bool)
+
+
+@dataclass(frozen=True)
+class _CellZones:
+    """The zones of one cell: local labels (1..n, 0 outside any zone) over its coarse block."""
+
+    labels: npt.NDArray[np.int32]
+    unknown: npt.NDArray[np.bool_]  # (n,) kind of each local zone
+    portals: IndexArray  # (P, 2) local (free, unknown) zone pairs
+
+
+@dataclass(frozen=True)
+class Zones:
+    """The decomposition of one map.
+
+    Attributes:
+        centers: (N, 3) world metres.
+        unknown: (N,) True for unknown zones, False for free zones.
+        cell: (N,) index of the zone's cell.
+        labels: coarse grid of zone ids + 1 (0: no zone).
+        factor: voxels per coarse cell along each axis.
+        distance_m: (N, N) shortest distances along the connectivity graph (inf: not joined).
+        kept: (N,) False for unknown zones that are holes.
+    """
+
+    centers: FloatArray
+    unknown: npt.NDArray[np.bool_]
+    cell: IndexArray
+    labels: npt.NDArray[np.int32]
+    factor: int
+    distance_m: FloatArray
+    kept: npt.NDArray[np.bool_]
+
+    def zone_at(self, view: MapView, points: FloatArray) -> IndexArray:
+        """(M,) the zone id holding each world point's coarse cell, -1 for none."""
+        c = view.world_to_index(points) // self.factor
+        c = np.clip(c, 0, np.array(self.labels.shape) - 1)
+        out: IndexArray = self.labels[c[:, 0], c[:, 1], c[:, 2]].astype(np.int64) - 1
+        return out
+
+
+class ZoneGrid:
+    """Cells over a map's grid and the zones of each, relabelled where the map changed."""
+
+    def __init__(self, shape: tuple[int, int, int], origin: FloatArray, voxel_m: float,
+                 cell_size_m: float, ccl_step: int, min_free_cells: int,
+                 min_unknown_fraction: float, clearance_m: float,
+                 layers: int | None = None) -> None:
+        self.factor = ccl_step
+        self.origin = np.asarray(origin, dtype=np.float64)
+        self.voxel_m = voxel_m
+        self.coarse_shape = tuple(math.ceil(n / ccl_step) for n in shape)
+        coarse_m = voxel_m * ccl_step
+        side = max(1, round(cell_size_m / coarse_m))
+        height_m = shape[2] * voxel_m
+        n_layers = layers if layers is not None else _layers(height_m)
+        z_side = math.ceil(self.coarse_shape[2] / n_layers)
+        self.sides = (side, side, z_side)
+        self.counts = tuple(math.ceil(n / s) for n, s in zip(self.coarse_shape, self.sides,
+                                                            strict=True))
+        self.min_free_cells = min_free_cells
+        self.min_unknown_fraction = min_unknown_fraction
+        self.gap = max(1, math.ceil(clearance_m / coarse_m) + 1)
+        self._cache: dict[bytes, _CellZones] = {}
+
+    def cell_of(self, view: MapView, points: FloatArray) -> IndexArray:
+        """(M,) the cell index of each world point."""
+        c = view.world_to_index(points) // self.factor // np.array(self.sides)
+        c = np.clip(c, 0, np.array(self.counts) - 1)
+        out: IndexArray = (c[:, 0] * self.counts[1] + c[:, 1]) * self.counts[2] + c[:, 2]
+        return out
+
+    def _blocks(self) -> list[tuple[slice, slice, slice]]:
+        sx, sy, sz = self.sides
+        nx, ny, nz = self.counts
+        return [(slice(i * sx, (i + 1) * sx), slice(j * sy, (j + 1) * sy),
+                 slice(k * sz, (k + 1) * sz))
+                for i in range(nx) for j in range(ny) for k in range(nz)]
+
+    def update(self, view: MapView) -> Zones:
+        """The zones of the current map."""
+        f = self.factor
+        free = _reduce(view.traversable, f, np.logical_or)
+        unknown = _reduce(view.state == VoxelState.UNKNOWN, f, np.logical_and)
+        labels = np.zeros(self.coarse_shape, dtype=np.int32)
+        kinds: list[npt.NDArray[np.bool_]] = []
+        cells: list[IndexArray] = []
+        portals: list[IndexArray] = []
+        kept: dict[bytes, _CellZones] = {}
+        offset = 0
+        for index, block in enumerate(self._blocks()):
+            fb, ub = free[block], unknown[block]
+            key = np.packbits(fb).tobytes() + np.packbits(ub).tobytes()
+            zones = self._cache.get(key) or kept.get(key) or self._label(fb, ub)
+            kept[key] = zones
+            n = len(zones.unknown)
+            if n == 0:
+                continue
+            local = zones.labels
+            labels[block] = np.where(local > 0, local + offset, 0)
+            kinds.append(zones.unknown)
+            cells.append(np.full(n, index, dtype=np.int64))
+            portals.append(zones.portals + offset)
+            offset += n
+        self._cache = kept
+        unknown_kind = np.concatenate(kinds) if kinds else np.zeros(0, dtype=bool)
+        cell = np.concatenate(cells) if cells else np.zeros(0, dtype=np.int64)
+        centers = self._centers(view, labels, offset)
+        edges = np.vstack([self._face_pairs(labels, unknown_kind), *portals]
+                          ) if offset else np.zeros((0, 2), dtype=np.int64)
+        distance = _graph_distances(centers, edges, offset)
+        kept_zones = _not_holes(distance, unknown_kind)
+        return Zones(centers, unknown_kind, cell, labels, f, distance, kept_zones)
+
+    def _label(self, free: BoolGrid, unknown: BoolGrid) -> _CellZones:
+        """Zones of one cell's coarse block (see the module's docstring)."""
+        out = np.zeros(free.shape, dtype=np.int32)
+        kinds: list[bool] = []
+        min_unknown = self.min_unknown_fraction * free.size
+        for is_unknown, mask, least in ((False, free, self.min_free_cells),
+                                        (True, unknown, min_unknown)):
+            lab, n = ndimage.label(mask, structure=_CONNECT_26)
+            if n == 0:
+                continue
+            sizes = np.bincount(lab.ravel(), minlength=n + 1)
+            big = np.flatnonzero(sizes[1:] >= least) + 1
+            remap = np.zeros(n + 1, dtype=np.int32)
+            remap[big] = len(kinds) + 1 + np.arange(len(big), dtype=np.int32)
+            out = np.where(remap[lab] > 0, remap[lab], out)
+            kinds.extend([is_unknown] * len(big))
+        kind = np.array(kinds, dtype=bool)
+        return _CellZones(out, kind, self._portals(out, kind))
+
+    def _portals(self, labels: npt.NDArray[np.int32],
+                 unknown: npt.NDArray[np.bool_]) -> IndexArray:
+        """Local (free, unknown) zone pairs within `gap` coarse cells of each other."""
+        if not unknown.any() or unknown.all():
+            return np.zeros((0, 2), dtype=np.int64)
+        is_unknown = np.concatenate([[False], unknown])[labels]
+        ulab = np.where(is_unknown, labels, 0)
+        size = 2 * self.gap + 1
+        near_max = ndimage.maximum_filter(ulab, size=size, mode="constant")
+        big = np.iinfo(np.int32).max
+        near_min = ndimage.minimum_filter(np.where(ulab > 0, ulab, big), size=size,
+                                          mode="constant", cval=big)
+        free_cells = (labels > 0) & ~is_unknown
+        pairs = np.concatenate([
+            np.stack([labels[free_cells], near[free_cells]], axis=1)
+            for near in (near_max, near_min)])
+        pairs = pairs[(pairs[:, 1] > 0) & (pairs[:, 1] < big)]
+        out: IndexArray = np.unique(pairs, axis=0).astype(np.int64) - 1
+        return out
+
+    def _face_pairs(self, labels: npt.NDArray[np.int32],
+                    unknown: npt.NDArray[np.bool_]) -> IndexArray:
+        """Zone pairs of the same kind whose coarse cells touch across a cell face."""
+        found = []
+        for axis, side in enumerate(self.sides):
+            for b in range(side, labels.shape[axis], side):
+                a = labels.take(b - 1, axis=axis).ravel()
+                c = labels.take(b, axis=axis).ravel()
+                ok = (a > 0) & (c > 0)
+                a, c = a[ok] - 1, c[ok] - 1
+                same = unknown[a] == unknown[c]
+                found.append(np.stack([a[same], c[same]], axis=1))
+        if not found:
+            return np.zeros((0, 2), dtype=np.int64)
+        out: IndexArray = np.unique(np.vstack(found), axis=0).astype(np.int64)
+        return out
+
+    def _centers(self, view: MapView, labels: npt.NDArray[np.int32], n: int) -> FloatArray:
+        """(n, 3) each zone's mean coarse cell, moved to the nearest of its cells."""
+        if n == 0:
+            return np.zeros((0, 3))
+        cells = np.argwhere(labels)
+        ids = labels[cells[:, 0], cells[:, 1], cells[:, 2]].astype(np.int64) - 1
+        f = self.factor
+        world = self.origin + (cells * f + f / 2.0) * self.voxel_m
+        counts = np.bincount(ids, minlength=n).astype(np.float64)
+        sums = np.stack([np.bincount(ids, world[:, a], n) for a in range(3)], axis=1)
+        mean = sums / np.maximum(counts, 1.0)[:, None]
+        dist = np.sum((world - mean[ids]) ** 2, axis=1)
+        order = np.lexsort((dist, ids))
+        first = order[np.searchsorted(ids[order], np.arange(n))]
+        out: FloatArray = world[first]
+        return out
+
+
+def _layers(height_m: float) -> int:
+    """The code's layers: one for boxes up to 2 m high (its 2D grids), then 2, 3 or 4 below 5,
+    10 and 20 m."""
+    if height_m <= 2.0 + 1e-6:
+        return 1
+    for layers, below in ((2, 5.0), (3, 10.0), (4, 20.0)):
+        if height_m < below:
+            return layers
+    return max(1, round(height_m / 5.0))
+
+
+def _reduce(mask: BoolGrid, f: int, how: np.ufunc) -> BoolGrid:
+    """Coarse grid of `f`-voxel cubes: `how` (logical or / and) over each cube's voxels; the
+    cubes past the grid's end are padded with False (or) / True (and)."""
+    pad = [(0, (-n) % f) for n in mask.shape]
+    padded = np.pad(mask, pad, constant_values=how is np.logical_and)
+    nx, ny, nz = (n // f for n in padded.shape)
+    blocks = padded.reshape(nx, f, ny, f, nz, f)
+    out: BoolGrid = np.ascontiguousarray(how.reduce(how.reduce(how.reduce(
+        blocks, axis=5), axis=3), axis=1))
+    return out
+
+
+def _graph_distances(centers: FloatArray, edges: IndexArray, n: int) -> FloatArray:
+    """(n, n) shortest distances along the edges, each as long as its centres are apart."""
+    if n == 0:
+        return np.zeros((0, 0))
+    if len(edges) == 0:
+        out = np.full((n, n), np.inf)
+        np.fill_diagonal(out, 0.0)
+        return out
+    length = np.linalg.norm(centers[edges[:, 0]] - centers[edges[:, 1]], axis=1)
+    graph = sparse.coo_matrix((np.maximum(length, 1e-3), (edges[:, 0], edges[:, 1])),
+                              shape=(n, n)).tocsr()
+    dist: FloatArray = csgraph.shortest_path(graph, method="D", directed=False)
+    return dist
+
+
+def _not_holes(distance: FloatArray, unknown: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
+    """(n,) False for unknown zones joined to no free zone."""
+    if len(unknown) == 0:
+        return np.zeros(0, dtype=bool)
+    joined = np.isfinite(distance[:, ~unknown]).any(axis=1)
+    out: npt.NDArray[np.bool_] = ~unknown | joined
+    return out
