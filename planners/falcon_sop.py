@@ -24,7 +24,7 @@ MAX_FRONTIERS = 12
 def _solve(start_f: FloatArray, start_z1: float, ff: FloatArray, fz: FloatArray,
            zf: FloatArray, zz: FloatArray) -> IntArray:
     k = ff.shape[0]
-    m = zz.shape[0]
+    m = fz.shape[1]
     full = (1 << k) - 1
     # best[mask, j, l]: least cost having visited the frontiers in `mask` and zones 1..j, now at
     # frontier l (l < k) or at zone j (l == k; zone 0 is the start).
@@ -101,7 +101,9 @@ def solve_sop(start: npt.ArrayLike, between: npt.ArrayLike, to_zone: npt.ArrayLi
     k = ff.shape[0]
     if k > MAX_FRONTIERS:
         raise ValueError(f"at most {MAX_FRONTIERS} frontiers, got {k}")
-    fz = np.ascontiguousarray(to_zone, dtype=np.float64).reshape(k, -1)
+    fz = np.ascontiguousarray(to_zone, dtype=np.float64)
+    if fz.ndim != 2 or fz.shape[0] != k:
+        raise ValueError(f"to_zone must be (k, m) with k = {k}, got {fz.shape}")
     m = fz.shape[1]
     zf = np.ascontiguousarray(from_zone, dtype=np.float64).reshape(m, k)
     steps = np.asarray(zone_steps, dtype=np.float64).reshape(-1)
