@@ -25,8 +25,8 @@ import numpy.typing as npt
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from benchmarks.common import print_table, write_json  # noqa: E402
-from planners.tour import solve_atsp, tour_cost  # noqa: E402
+from benchmarks.common import print_table, write_json
+from planners.tour import solve_atsp, tour_cost
 
 FloatArray = npt.NDArray[np.float64]
 Solver = Callable[[FloatArray], list[int]]

@@ -218,14 +218,15 @@ class FalconPlanner(FuelPlanner):
             gap = np.linalg.norm(pts[-1] - self._guide, axis=1)
             end = time_cost(gap, pts[-1], self._guide, yws[-1], yws[-1], np.zeros(3), dyn)
         best = _first_of_cheapest(first, steps if cfg.refine_local else [], end)
-        head = [(pts[0][best], float(yws[0][best]), chosen[0])]
-        head += [(pts[0][k], float(yws[0][k]), chosen[0])
-                 for k in np.argsort(first, kind="stable") if k != best]
-        for c in order[1:]:
-            views = active[c][1]
-            t = self._top(pos, views)
-            head.append((views.positions[t], float(views.yaws[t]), c))
-        return head
+        ranked = [best] + [int(k) for k in np.argsort(first, kind="stable") if k != best]
+        head = [(pts[0][k], float(yws[0][k]), chosen[0]) for k in ranked]
+        return head + self._best_of(pos, active, order[1:])
+
+    def _best_of(self, pos: FloatArray, active: Active,
+                 clusters: list[int]) -> list[tuple[FloatArray, float, int]]:
+        """Each cluster's representative viewpoint (FUEL's `_top`) as a flight candidate."""
+        return [(v.positions[k], float(v.yaws[k]), c) for c in clusters
+                for v in (active[c][1],) for k in (self._top(pos, v),)]
 
 
 def _first_of_cheapest(first: FloatArray, steps: list[FloatArray],
