@@ -2,7 +2,7 @@
 default preset, one core.
 
     nice -n 10 .venv/bin/python benchmarks/falcon_comparison.py [--areas maze offices-a warehouse]
-        [--planners falcon-v1 fuel-v1 splatplanner-v2] [--seeds 0]
+        [--planners falcon-v1 fuel-v1 splatplanner-v2] [--seeds 0] [--append]
 
 Runs one episode at a time in this process, with one thread for numba, OpenMP and BLAS. Prints
 coverage, time to 90 % coverage, collisions and the median planning time per iteration (every
@@ -21,6 +21,7 @@ for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MK
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
+import json  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -31,7 +32,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from areas import load_area, load_ground_truth  # noqa: E402
-from benchmarks.common import print_table, write_json  # noqa: E402
+from benchmarks.common import RESULTS, print_table, write_json  # noqa: E402
 from planners.registry import make, spec  # noqa: E402
 from sim.config import preset  # noqa: E402
 from sim.episode import run_episode  # noqa: E402
@@ -87,8 +88,14 @@ def main() -> None:
     parser.add_argument("--planners", nargs="+", default=PLANNERS)
     parser.add_argument("--seeds", type=int, nargs="+", default=[0])
     parser.add_argument("--out", default="falcon_comparison", help="JSON name in results/")
+    parser.add_argument("--append", action="store_true",
+                        help="keep the runs already in the JSON that these do not replace")
     args = parser.parse_args()
     runs: list[dict[str, Any]] = []
+    if args.append and (RESULTS / f"{args.out}.json").exists():
+        redo = {(a, spec(p).id, s) for a in args.areas for p in args.planners for s in args.seeds}
+        old = json.loads((RESULTS / f"{args.out}.json").read_text())["runs"]
+        runs = [r for r in old if (r["area"], r["planner"], r["seed"]) not in redo]
     for area in args.areas:
         for planner in args.planners:
             for seed in args.seeds:

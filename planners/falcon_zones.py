@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import numpy.typing as npt
 from scipy import ndimage, sparse
@@ -39,6 +40,7 @@ from sim.occupancy import VoxelState
 FloatArray = npt.NDArray[np.float64]
 
 _CONNECT_26 = np.ones((3, 3, 3), dtype=bool)
+_UNKNOWN = np.uint8(VoxelState.UNKNOWN)
 
 
 @dataclass(frozen=True)
@@ -48,6 +50,7 @@ class _CellZones:
     labels: npt.NDArray[np.int32]
     unknown: npt.NDArray[np.bool_]  # (n,) kind of each local zone
     portals: IndexArray  # (P, 2) local (free, unknown) zone pairs
+    centers: FloatArray  # (n, 3) coarse cell coordinates within the block
 
 
 @dataclass(frozen=True)
@@ -121,12 +124,12 @@ class ZoneGrid:
     def update(self, view: MapView) -> Zones:
         """The zones of the current map."""
         f = self.factor
-        free = _reduce(view.traversable, f, np.logical_or)
-        unknown = _reduce(view.state == VoxelState.UNKNOWN, f, np.logical_and)
+        free, unknown = _coarse(view.traversable, view.state, f)
         labels = np.zeros(self.coarse_shape, dtype=np.int32)
         kinds: list[npt.NDArray[np.bool_]] = []
         cells: list[IndexArray] = []
         portals: list[IndexArray] = []
+        corners: list[FloatArray] = []
         kept: dict[bytes, _CellZones] = {}
         offset = 0
         for index, block in enumerate(self._blocks()):
@@ -142,11 +145,14 @@ class ZoneGrid:
             kinds.append(zones.unknown)
             cells.append(np.full(n, index, dtype=np.int64))
             portals.append(zones.portals + offset)
+            corners.append(zones.centers + np.array([b.start for b in block]))
             offset += n
         self._cache = kept
         unknown_kind = np.concatenate(kinds) if kinds else np.zeros(0, dtype=bool)
         cell = np.concatenate(cells) if cells else np.zeros(0, dtype=np.int64)
-        centers = self._centers(view, labels, offset)
+        f_m = self.factor * self.voxel_m
+        centers = (self.origin + (np.vstack(corners) + 0.5) * f_m if corners
+                   else np.zeros((0, 3)))
         edges = np.vstack([self._face_pairs(labels, unknown_kind), *portals]
                           ) if offset else np.zeros((0, 2), dtype=np.int64)
         distance = _graph_distances(centers, edges, offset)
@@ -170,7 +176,7 @@ class ZoneGrid:
             out = np.where(remap[lab] > 0, remap[lab], out)
             kinds.extend([is_unknown] * len(big))
         kind = np.array(kinds, dtype=bool)
-        return _CellZones(out, kind, self._portals(out, kind))
+        return _CellZones(out, kind, self._portals(out, kind), _centers(out, len(kind)))
 
     def _portals(self, labels: npt.NDArray[np.int32],
                  unknown: npt.NDArray[np.bool_]) -> IndexArray:
@@ -195,36 +201,37 @@ class ZoneGrid:
     def _face_pairs(self, labels: npt.NDArray[np.int32],
                     unknown: npt.NDArray[np.bool_]) -> IndexArray:
         """Zone pairs of the same kind whose coarse cells touch across a cell face."""
-        found = []
+        n = len(unknown)
+        codes = [np.zeros(0, dtype=np.int64)]
         for axis, side in enumerate(self.sides):
-            for b in range(side, labels.shape[axis], side):
-                a = labels.take(b - 1, axis=axis).ravel()
-                c = labels.take(b, axis=axis).ravel()
-                ok = (a > 0) & (c > 0)
-                a, c = a[ok] - 1, c[ok] - 1
-                same = unknown[a] == unknown[c]
-                found.append(np.stack([a[same], c[same]], axis=1))
-        if not found:
-            return np.zeros((0, 2), dtype=np.int64)
-        out: IndexArray = np.unique(np.vstack(found), axis=0).astype(np.int64)
+            at = np.arange(side, labels.shape[axis], side)
+            if len(at) == 0:
+                continue
+            a = labels.take(at - 1, axis=axis).ravel().astype(np.int64)
+            c = labels.take(at, axis=axis).ravel().astype(np.int64)
+            ok = (a > 0) & (c > 0)
+            a, c = a[ok] - 1, c[ok] - 1
+            same = unknown[a] == unknown[c]
+            codes.append(a[same] * n + c[same])
+        found = np.unique(np.concatenate(codes))
+        out: IndexArray = np.stack([found // n, found % n], axis=1)
         return out
 
-    def _centers(self, view: MapView, labels: npt.NDArray[np.int32], n: int) -> FloatArray:
-        """(n, 3) each zone's mean coarse cell, moved to the nearest of its cells."""
-        if n == 0:
-            return np.zeros((0, 3))
-        cells = np.argwhere(labels)
-        ids = labels[cells[:, 0], cells[:, 1], cells[:, 2]].astype(np.int64) - 1
-        f = self.factor
-        world = self.origin + (cells * f + f / 2.0) * self.voxel_m
-        counts = np.bincount(ids, minlength=n).astype(np.float64)
-        sums = np.stack([np.bincount(ids, world[:, a], n) for a in range(3)], axis=1)
-        mean = sums / np.maximum(counts, 1.0)[:, None]
-        dist = np.sum((world - mean[ids]) ** 2, axis=1)
-        order = np.lexsort((dist, ids))
-        first = order[np.searchsorted(ids[order], np.arange(n))]
-        out: FloatArray = world[first]
-        return out
+
+def _centers(labels: npt.NDArray[np.int32], n: int) -> FloatArray:
+    """(n, 3) each zone's coarse cell nearest the mean of its cells (coarse coordinates)."""
+    if n == 0:
+        return np.zeros((0, 3))
+    cells = np.argwhere(labels).astype(np.float64)
+    ids = labels[labels > 0].astype(np.int64) - 1  # argwhere's order: C order, as this
+    counts = np.bincount(ids, minlength=n).astype(np.float64)
+    sums = np.stack([np.bincount(ids, cells[:, a], n) for a in range(3)], axis=1)
+    mean = sums / np.maximum(counts, 1.0)[:, None]
+    dist = np.sum((cells - mean[ids]) ** 2, axis=1)
+    order = np.lexsort((dist, ids))
+    first = order[np.searchsorted(ids[order], np.arange(n))]
+    out: FloatArray = cells[first]
+    return out
 
 
 def _layers(height_m: float) -> int:
@@ -238,16 +245,23 @@ def _layers(height_m: float) -> int:
     return max(1, round(height_m / 5.0))
 
 
-def _reduce(mask: BoolGrid, f: int, how: np.ufunc) -> BoolGrid:
-    """Coarse grid of `f`-voxel cubes: `how` (logical or / and) over each cube's voxels; the
-    cubes past the grid's end are padded with False (or) / True (and)."""
-    pad = [(0, (-n) % f) for n in mask.shape]
-    padded = np.pad(mask, pad, constant_values=how is np.logical_and)
-    nx, ny, nz = (n // f for n in padded.shape)
-    blocks = padded.reshape(nx, f, ny, f, nz, f)
-    out: BoolGrid = np.ascontiguousarray(how.reduce(how.reduce(how.reduce(
-        blocks, axis=5), axis=3), axis=1))
-    return out
+@numba.njit(cache=True)
+def _coarse(traversable: BoolGrid, state: npt.NDArray[np.uint8],
+            f: int) -> tuple[BoolGrid, BoolGrid]:
+    """Coarse grids of `f`-voxel cubes: free where any voxel is traversable, unknown where every
+    voxel is unknown (cubes past the grid's end count their missing voxels as unknown)."""
+    nx, ny, nz = traversable.shape
+    shape = ((nx + f - 1) // f, (ny + f - 1) // f, (nz + f - 1) // f)
+    free = np.zeros(shape, dtype=np.bool_)
+    unknown = np.ones(shape, dtype=np.bool_)
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                if traversable[i, j, k]:
+                    free[i // f, j // f, k // f] = True
+                if state[i, j, k] != _UNKNOWN:
+                    unknown[i // f, j // f, k // f] = False
+    return free, unknown
 
 
 def _graph_distances(centers: FloatArray, edges: IndexArray, n: int) -> FloatArray:
