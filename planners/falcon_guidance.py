@@ -63,7 +63,7 @@ def lengths(view: MapView, zones: Zones, passable: BoolGrid, a: FloatArray, za: 
     if ia.any() and ib.any():
         to_a = np.linalg.norm(a[ia] - zones.centers[za[ia]], axis=1)
         to_b = np.linalg.norm(b[ib] - zones.centers[zb[ib]], axis=1)
-        sub = zones.distance_m[np.ix_(za[ia], zb[ib])] + to_a[:, None] + to_b[None, :]
+        sub = zones.distance_m(za[ia], zb[ib]) + to_a[:, None] + to_b[None, :]
         graph[np.ix_(ia, ib)] = sub
     i, j = np.nonzero(euclid <= radius_m)
     clear = segments_clear(view, passable, a[i], b[j]) if len(i) else np.zeros(0, dtype=bool)

@@ -63,7 +63,7 @@ class Zones:
         cell: (N,) index of the zone's cell.
         labels: coarse grid of zone ids + 1 (0: no zone).
         factor: voxels per coarse cell along each axis.
-        distance_m: (N, N) shortest distances along the connectivity graph (inf: not joined).
+        graph: (N, N) sparse connectivity graph, edges as long as their centres are apart.
         kept: (N,) False for unknown zones that are holes.
     """
 
@@ -72,8 +72,18 @@ class Zones:
     cell: IndexArray
     labels: npt.NDArray[np.int32]
     factor: int
-    distance_m: FloatArray
+    graph: sparse.csr_matrix
     kept: npt.NDArray[np.bool_]
+
+    def distance_m(self, a: IndexArray, b: IndexArray) -> FloatArray:
+        """(A, B) shortest distances along the graph from zones `a` to zones `b` (inf: not
+        joined), one Dijkstra search from each distinct zone of `a`."""
+        if len(a) == 0 or len(b) == 0:
+            return np.zeros((len(a), len(b)))
+        sources, row = np.unique(a, return_inverse=True)
+        dist = csgraph.dijkstra(self.graph, directed=False, indices=sources)
+        out: FloatArray = dist[np.ix_(row.ravel(), b)]
+        return out
 
     def zone_at(self, view: MapView, points: FloatArray) -> IndexArray:
         """(M,) the zone id holding each world point's coarse cell, -1 for none."""
@@ -155,9 +165,8 @@ class ZoneGrid:
                    else np.zeros((0, 3)))
         edges = np.vstack([self._face_pairs(labels, unknown_kind), *portals]
                           ) if offset else np.zeros((0, 2), dtype=np.int64)
-        distance = _graph_distances(centers, edges, offset)
-        kept_zones = _not_holes(distance, unknown_kind)
-        return Zones(centers, unknown_kind, cell, labels, f, distance, kept_zones)
+        graph = _graph(centers, edges, offset)
+        return Zones(centers, unknown_kind, cell, labels, f, graph, _not_holes(graph, unknown_kind))
 
     def _label(self, free: BoolGrid, unknown: BoolGrid) -> _CellZones:
         """Zones of one cell's coarse block (see the module's docstring)."""
@@ -251,38 +260,38 @@ def _coarse(traversable: BoolGrid, state: npt.NDArray[np.uint8],
     """Coarse grids of `f`-voxel cubes: free where any voxel is traversable, unknown where every
     voxel is unknown (cubes past the grid's end count their missing voxels as unknown)."""
     nx, ny, nz = traversable.shape
-    shape = ((nx + f - 1) // f, (ny + f - 1) // f, (nz + f - 1) // f)
-    free = np.zeros(shape, dtype=np.bool_)
-    unknown = np.ones(shape, dtype=np.bool_)
-    for i in range(nx):
-        for j in range(ny):
-            for k in range(nz):
-                if traversable[i, j, k]:
-                    free[i // f, j // f, k // f] = True
-                if state[i, j, k] != _UNKNOWN:
-                    unknown[i // f, j // f, k // f] = False
+    cx, cy, cz = (nx + f - 1) // f, (ny + f - 1) // f, (nz + f - 1) // f
+    free = np.zeros((cx, cy, cz), dtype=np.bool_)
+    unknown = np.ones((cx, cy, cz), dtype=np.bool_)
+    for a in range(cx):
+        for b in range(cy):
+            for c in range(cz):
+                # Stop scanning a cube once both answers are known.
+                for i in range(a * f, min(a * f + f, nx)):
+                    for j in range(b * f, min(b * f + f, ny)):
+                        for k in range(c * f, min(c * f + f, nz)):
+                            if traversable[i, j, k]:
+                                free[a, b, c] = True
+                            if state[i, j, k] != _UNKNOWN:
+                                unknown[a, b, c] = False
+                            if free[a, b, c] and not unknown[a, b, c]:
+                                break
     return free, unknown
 
 
-def _graph_distances(centers: FloatArray, edges: IndexArray, n: int) -> FloatArray:
-    """(n, n) shortest distances along the edges, each as long as its centres are apart."""
-    if n == 0:
-        return np.zeros((0, 0))
-    if len(edges) == 0:
-        out = np.full((n, n), np.inf)
-        np.fill_diagonal(out, 0.0)
-        return out
+def _graph(centers: FloatArray, edges: IndexArray, n: int) -> sparse.csr_matrix:
+    """(n, n) the edges, each as long as its centres are apart."""
     length = np.linalg.norm(centers[edges[:, 0]] - centers[edges[:, 1]], axis=1)
-    graph = sparse.coo_matrix((np.maximum(length, 1e-3), (edges[:, 0], edges[:, 1])),
-                              shape=(n, n)).tocsr()
-    dist: FloatArray = csgraph.shortest_path(graph, method="D", directed=False)
-    return dist
+    return sparse.coo_matrix((np.maximum(length, 1e-3), (edges[:, 0], edges[:, 1])),
+                             shape=(n, n)).tocsr()
 
 
-def _not_holes(distance: FloatArray, unknown: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
-    """(n,) False for unknown zones joined to no free zone."""
+def _not_holes(graph: sparse.csr_matrix, unknown: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
+    """(n,) False for unknown zones in a connected part of the graph without a free zone."""
     if len(unknown) == 0:
         return np.zeros(0, dtype=bool)
-    joined = np.isfinite(distance[:, ~unknown]).any(axis=1)
-    out: npt.NDArray[np.bool_] = ~unknown | joined
+    _, part = csgraph.connected_components(graph, directed=False)
+    with_free = np.zeros(part.max() + 1, dtype=bool)
+    with_free[part[~unknown]] = True
+    out: npt.NDArray[np.bool_] = with_free[part]
     return out

@@ -54,8 +54,8 @@ def test_a_wall_cuts_a_cell_into_two_free_zones(make_stack: StackFactory) -> Non
     assert zones.centers[left, 0] < 2.0 < zones.centers[right, 0] < 5.0
     # The right part of the first cell touches the second cell across x = 5 m; the wall cuts
     # the left part off.
-    assert np.isfinite(zones.distance_m[right, far])
-    assert np.isinf(zones.distance_m[left, far])
+    assert np.isfinite(zones.distance_m(np.array([right]), np.array([far]))).all()
+    assert np.isinf(zones.distance_m(np.array([left]), np.array([far]))).all()
     # Centres are coarse cells of their zone, and the labels find them.
     assert zones.zone_at(view, zones.centers).tolist() == list(range(3))
 
@@ -75,7 +75,7 @@ def test_unknown_zones_join_by_portals_and_holes_are_left_out(make_stack: StackF
     assert not zones.kept[pocket[0]]
     assert zones.kept[end[0]]
     free = np.flatnonzero(~zones.unknown)
-    assert np.isfinite(zones.distance_m[free, end[0]]).all()
+    assert np.isfinite(zones.distance_m(free, np.array([end[0]]))).all()
 
     # The coverage path leaves the unknown zone for last and never goes to the pocket.
     here = np.array([2.5, 4.6, 1.0])
