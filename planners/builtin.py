@@ -16,6 +16,7 @@ from planners.aep import Aep, AepV1, AepV3
 from planners.api import Planner
 from planners.classic import Classic, ClassicV2
 from planners.esm import Esm, EsmRecon
+from planners.falcon import Falcon
 from planners.fuel import Fuel
 from planners.nbvp import Nbvp
 from planners.rapid import Rapid, RapidV2
@@ -30,6 +31,8 @@ _AEP_REFERENCE = ("M. Selin, M. Tiger, D. Duberg, F. Heintz, P. Jensfelt, Effici
                   "autonomous exploration planning of large-scale 3-D environments, RA-L 2019")
 _FUEL_REFERENCE = ("B. Zhou, Y. Zhang, X. Chen, S. Shen, FUEL: fast UAV exploration using "
                    "incremental frontier structure and hierarchical planning, RA-L 2021")
+_FALCON_REFERENCE = ("Y. Zhang, X. Chen, C. Feng, B. Zhou, S. Shen, FALCON: fast autonomous aerial "
+                     "exploration using coverage path guidance, T-RO 2024")
 _ESM_REFERENCE = ("L. Schmid, M. Pantic, R. Khanna, L. Ott, R. Siegwart, J. Nieto, An efficient "
                   "sampling-based method for online informative path planning in unknown "
                   "environments, RA-L 2020")
@@ -114,6 +117,14 @@ BUILTINS: tuple[tuple[str, int, type[Planner], str, str], ...] = (
         "best viewpoints by flight time, the next few clusters' viewpoints refined by a graph "
         "search; replanned in flight.",
         _FUEL_REFERENCE,
+    ),
+    (
+        "falcon", 1, Falcon,
+        "FUEL's frontier clusters guided by a coverage path: the explored map cut into cells "
+        "and their free and unknown zones with a connectivity graph, an ATSP tour over the "
+        "zones, the nearby frontiers ordered by a sequential ordering problem that keeps the "
+        "tour's order; replanned in flight.",
+        _FALCON_REFERENCE,
     ),
 )
 
