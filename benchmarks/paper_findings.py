@@ -2,15 +2,15 @@
 
     .venv/bin/python benchmarks/paper_findings.py [--planners classic rapid ...] \
         [--areas maze warehouse ...] [--runs 5 | --seeds 0 3] [--preset default] \
-        [--seconds S] [--jobs 2] [--load benchmarks/results/paper_findings.json]
+        [--seconds S] [--jobs 2] [--name NAME] [--load A.json B.json]
 
 Flies every planner x area x seed to the area's plateau time (or `--seconds`), `--jobs` runs at
 a time in separate processes, then prints per area the relative coverage (the leaderboard's:
 explored observable volume over the best planner's mean on that area) and the F-score beside the
 paper's, the Kendall tau between our average ranks and the paper's (both ranked over the planners
 and areas flown here), and each finding of the paper's sections 4.1-4.3 marked held, not held or
-not measured. `--load` reads the runs of an earlier JSON instead of flying. Writes
-`benchmarks/results/paper_findings.json`.
+not measured. `--load` reads the runs of earlier JSONs instead of flying (subsets flown apart
+are compared together). Writes `benchmarks/results/paper_findings.json` (or `--name`).
 """
 
 from __future__ import annotations
@@ -161,13 +161,16 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=None,
                         help="simulated seconds (default: each area's plateau time)")
     parser.add_argument("--jobs", type=int, default=1, help="runs flown at a time")
-    parser.add_argument("--load", type=Path, default=None,
-                        help="take the runs from this JSON instead of flying them")
+    parser.add_argument("--load", type=Path, nargs="+", default=None,
+                        help="take the runs from these JSONs (of this script) instead of flying")
+    parser.add_argument("--name", default="paper_findings",
+                        help="the JSON's name under benchmarks/results/")
     args = parser.parse_args()
-    runs = json.loads(args.load.read_text())["runs"] if args.load else fly_all(args)
+    runs = [r for path in args.load for r in json.loads(path.read_text())["runs"]] \
+        if args.load else fly_all(args)
     summary = compare(runs)
     report(summary)
-    path = write_json("paper_findings", {
+    path = write_json(args.name, {
         "command": "python benchmarks/paper_findings.py " + " ".join(sys.argv[1:]),
         "preset": args.preset, "runs": runs, **summary})
     print(f"wrote {path}")
