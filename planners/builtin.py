@@ -16,6 +16,7 @@ from planners.aep import Aep, AepV1, AepV3
 from planners.api import Planner
 from planners.classic import Classic, ClassicV2
 from planners.esm import Esm, EsmRecon
+from planners.esm_horizon import EsmHorizon, EsmReconHorizon
 from planners.falcon import Falcon
 from planners.fuel import Fuel
 from planners.nbvp import Nbvp
@@ -109,6 +110,19 @@ BUILTINS: tuple[tuple[str, int, type[Planner], str, str], ...] = (
         "esm-recon", 1, EsmRecon,
         "ESM with a reconstruction gain: surface voxels seen by few fused frames or "
         "from few directions, plus unknown volume, per second of flight.",
+        _ESM_REFERENCE,
+    ),
+    (
+        "esm-ipp", 2, EsmHorizon,
+        "As esm-ipp-v1, with the original's local horizon: only views within the update range "
+        "of the vehicle are re-evaluated, no segment is shorter than the minimum length, and "
+        "areas mapped at 0.2 m grow the FLYBO authors' large-area tree (3 m segments).",
+        _ESM_REFERENCE,
+    ),
+    (
+        "esm-recon", 2, EsmReconHorizon,
+        "As esm-recon-v1, with esm-ipp-v2's local horizon, minimum segment length and "
+        "large-area tree.",
         _ESM_REFERENCE,
     ),
     (

@@ -283,7 +283,7 @@ def _context(seed: int = 0) -> PlannerContext:
                           rng=np.random.default_rng(seed))
 
 
-@pytest.mark.parametrize("name", ["esm-ipp", "esm-recon"])
+@pytest.mark.parametrize("name", ["esm-ipp-v1", "esm-recon-v1", "esm-ipp-v2", "esm-recon-v2"])
 def test_tree_persists_and_is_rerooted_at_the_flown_segment(name: str) -> None:
     state, safety = _open_room()
     view = stack_from_state(state, VOXEL, safety).view()
@@ -307,7 +307,7 @@ def test_tree_persists_and_is_rerooted_at_the_flown_segment(name: str) -> None:
     assert below <= after  # the flown child's subtree is kept
     assert tree.size >= size - 1  # at most the old root dropped, if it had nothing left
     assert plan2.info["mode"] in ("tree", "back")
-    assert spec(name).version == 1
+    assert spec(name).id == name
 
 
 def _corridor() -> np.ndarray:
@@ -320,14 +320,16 @@ def _corridor() -> np.ndarray:
     return state
 
 
+@pytest.mark.parametrize("planner_id", ["esm-ipp-v1", "esm-ipp-v2"])
 @pytest.mark.parametrize("sampling", ["box", "traversable"])
-def test_a_root_in_a_narrow_corridor_does_not_starve_the_global_samples(sampling: str) -> None:
+def test_a_root_in_a_narrow_corridor_does_not_starve_the_global_samples(
+        sampling: str, planner_id: str) -> None:
     """The corridor cannot hold `local_count` nodes near the root; semilocal samples are
     counted as drawn, not as kept, so the rest of the tries are global and the tree grows along
     the corridor (drawing semilocal samples until enough were kept, it stayed within 1.5 m)."""
     view = stack_from_state(_corridor(), VOXEL, 0.45).view()
     start = np.array([0.55, 2.05, 1.25])
-    planner = make("esm-ipp", {"global_sampling": sampling})
+    planner = make(planner_id, {"global_sampling": sampling})
     assert isinstance(planner, Esm)
     planner.reset(_context())
     planner.plan(Observation(0.0, Pose(start.copy(), 0.0), np.zeros(3), view, PlanOutcome.NONE))
@@ -346,7 +348,7 @@ def test_a_sample_is_steered_from_the_next_nearest_node_when_the_nearest_is_wall
     view = stack_from_state(state, VOXEL, 0.45).view()
     sample = np.array([4.0, 1.0, 1.25])
     for candidates, steered in ((1, False), (2, True)):
-        planner = make("esm-ipp", {"steer_candidates": candidates})
+        planner = make("esm-ipp-v1", {"steer_candidates": candidates})
         assert isinstance(planner, Esm)
         planner.reset(_context())
         tree = SegmentTree(np.array([3.6, 2.9, 1.25]))  # nearest, across the wall

@@ -1,0 +1,207 @@
+"""Our results beside the FLYBO paper's Tables 2 and 3, and its findings held or not.
+
+    .venv/bin/python benchmarks/paper_findings.py [--planners classic rapid ...] \
+        [--areas maze warehouse ...] [--runs 5 | --seeds 0 3] [--preset default] \
+        [--seconds S] [--jobs 2] [--name NAME] [--load A.json B.json]
+
+Flies every planner x area x seed to the area's plateau time (or `--seconds`), `--jobs` runs at
+a time in separate processes, then prints per area the relative coverage (the leaderboard's:
+explored observable volume over the best planner's mean on that area) and the F-score beside the
+paper's, the Kendall tau between our average ranks and the paper's (both ranked over the planners
+and areas flown here), and each finding of the paper's sections 4.1-4.3 marked held, not held or
+not measured. `--load` reads the runs of earlier JSONs instead of flying (subsets flown apart
+are compared together). Writes `benchmarks/results/paper_findings.json` (or `--name`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.stats import kendalltau
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from benchmarks.common import print_table, write_json
+from benchmarks.paper_reference import (
+    AREAS,
+    PAPER_TABLE2,
+    PAPER_TABLE3_FSCORE,
+    PAPER_TABLE3_RMSE,
+    PLANNERS,
+    Cells,
+    average_ranks,
+    findings,
+)
+from sim.metrics import relative_coverage
+
+
+def fly(task: tuple[str, str, int, str, float | None]) -> dict[str, Any]:
+    """One run (in a worker process): its scores."""
+    from areas import load_area, load_ground_truth
+    from planners.registry import make, spec
+    from sim.config import preset
+    from sim.episode import run_episode
+
+    planner_id, area_name, seed, preset_name, seconds = task
+    area = load_area(area_name)
+    pid = spec(planner_id).id
+    result = run_episode(area, load_ground_truth(area), make(pid), preset(preset_name), seed,
+                         planner_name=pid, preset_name=preset_name, seconds=seconds)
+    observable = result.metrics.get("explored_observable_m3")
+    return {"planner": pid, "area": area_name, "seed": seed, "status": result.status.value,
+            "reason": result.reason, "coverage": result.coverage,
+            "explored_observable_m3": observable if observable is not None
+            else result.explored_volume_m3,
+            "fscore": result.surface.fscore, "rmse_m": result.surface.rmse_m,
+            "recall": result.surface.recall, "iterations": result.iterations,
+            "planning_ms_median": float(np.median(result.planning_times_ms))
+            if len(result.planning_times_ms) else None,
+            "simulated_until": result.simulated_until}
+
+
+def family(planner_id: str) -> str:
+    from planners.registry import parse_id
+
+    return parse_id(planner_id)[0]
+
+
+def our_cells(runs: list[dict[str, Any]]) -> Cells:
+    """Means per planner family and area; relative coverage as the leaderboard's."""
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for run in runs:
+        groups.setdefault((family(run["planner"]), run["area"]), []).append(run)
+    best: dict[str, float] = {}
+    for (_, area), members in groups.items():
+        mean = float(np.mean([m["explored_observable_m3"] for m in members]))
+        best[area] = max(best.get(area, 0.0), mean)
+    cells: Cells = {}
+    for (name, area), members in groups.items():
+        cells.setdefault(name, {})[area] = {
+            "coverage": float(np.mean([m["coverage"] for m in members])),
+            "relative": float(np.mean([relative_coverage(m["explored_observable_m3"], best[area])
+                                       for m in members])),
+            "fscore": float(np.mean([m["fscore"] for m in members])),
+            "rmse": float(np.mean([m["rmse_m"] for m in members])),
+            "recall": float(np.mean([m["recall"] for m in members])),
+        }
+    return cells
+
+
+def paper_cells(planners: list[str], areas: list[str]) -> Cells:
+    return {p: {a: {"relative": PAPER_TABLE2[p][AREAS.index(a)],
+                    "fscore": PAPER_TABLE3_FSCORE[p][AREAS.index(a)],
+                    "rmse": PAPER_TABLE3_RMSE[p][AREAS.index(a)]} for a in areas}
+            for p in planners}
+
+
+def tau(ours: dict[str, float], paper: dict[str, float]) -> float | None:
+    """Kendall tau (tau-b) between two average-rank orders over their common planners."""
+    common = sorted(set(ours) & set(paper))
+    if len(common) < 2:
+        return None
+    value = float(kendalltau([ours[p] for p in common], [paper[p] for p in common]).statistic)
+    return None if np.isnan(value) else value
+
+
+def compare(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Our cells and the paper's over the same planners and areas, ranks, taus, findings."""
+    ours = our_cells(runs)
+    unknown = sorted(set(ours) - set(PLANNERS))
+    flown = sorted(ours, key=lambda p: PLANNERS.index(p) if p in PLANNERS else 99)
+    areas = [a for a in AREAS if any(a in ours[p] for p in ours)]
+    paper = paper_cells([p for p in flown if p in PLANNERS], areas)
+    ranked = {}
+    for key, lower in (("relative", False), ("fscore", False), ("rmse", True)):
+        ranked[key] = {"ours": average_ranks(ours, key, lower),
+                       "paper": average_ranks(paper, key, lower)}
+    return {"planners": flown, "areas": areas, "not_in_paper": unknown,
+            "ours": ours, "paper": paper, "average_ranks": ranked,
+            "kendall_tau": {k: tau(v["ours"], v["paper"]) for k, v in ranked.items()},
+            "findings": findings(ours)}
+
+
+def _fmt(value: float | None, digits: int = 4) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
+def report(summary: dict[str, Any]) -> None:
+    ours, paper, areas = summary["ours"], summary["paper"], summary["areas"]
+    for key, title in (("relative", "Relative coverage (Table 2)"),
+                       ("fscore", "F-score (Table 3)")):
+        rows = []
+        for p in summary["planners"]:
+            cells = [f"{_fmt(ours[p].get(a, {}).get(key))} / "
+                     f"{_fmt(paper.get(p, {}).get(a, {}).get(key))}" for a in areas]
+            r = summary["average_ranks"][key]
+            rows.append([p, *cells, f"{_fmt(r['ours'].get(p), 2)} / "
+                         f"{_fmt(r['paper'].get(p), 2)}"])
+        print_table(f"{title}: ours / the paper's", ["planner", *areas, "avg rank"], rows)
+    taus = summary["kendall_tau"]
+    print(f"\nKendall tau of average ranks, ours against the paper's over the same planners and "
+          f"areas: coverage {_fmt(taus['relative'], 2)}, F-score {_fmt(taus['fscore'], 2)}, "
+          f"RMSE {_fmt(taus['rmse'], 2)}")
+    print_table("The paper's findings (sections 4.1-4.3)", ["section", "status", "finding"],
+                [[f["section"], f["status"], f["finding"]] for f in summary["findings"]])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--planners", nargs="+", default=list(PLANNERS),
+                        help="ids or names (a name is its latest version), one per family")
+    parser.add_argument("--areas", nargs="+", default=list(AREAS))
+    parser.add_argument("--runs", type=int, default=1, help="seeds 0 .. runs-1")
+    parser.add_argument("--seeds", type=int, nargs="+", default=None)
+    parser.add_argument("--preset", default="default")
+    parser.add_argument("--seconds", type=float, default=None,
+                        help="simulated seconds (default: each area's plateau time)")
+    parser.add_argument("--jobs", type=int, default=1, help="runs flown at a time")
+    parser.add_argument("--load", type=Path, nargs="+", default=None,
+                        help="take the runs from these JSONs (of this script) instead of flying")
+    parser.add_argument("--name", default="paper_findings",
+                        help="the JSON's name under benchmarks/results/")
+    args = parser.parse_args()
+    runs = [r for path in args.load for r in json.loads(path.read_text())["runs"]] \
+        if args.load else fly_all(args)
+    summary = compare(runs)
+    report(summary)
+    path = write_json(args.name, {
+        "command": "python benchmarks/paper_findings.py " + " ".join(sys.argv[1:]),
+        "preset": args.preset, "runs": runs, **summary})
+    print(f"wrote {path}")
+
+
+def fly_all(args: argparse.Namespace) -> list[dict[str, Any]]:
+    from planners.registry import UnknownPlannerError, spec
+
+    try:
+        ids = [spec(p).id for p in args.planners]
+    except UnknownPlannerError as exc:
+        raise SystemExit(str(exc)) from None
+    families = [family(i) for i in ids]
+    if len(set(families)) != len(families):
+        raise SystemExit(f"one version per planner family, please: {' '.join(ids)}")
+    unknown = sorted(set(args.areas) - set(AREAS))
+    if unknown:
+        raise SystemExit(f"not an area of the paper: {' '.join(unknown)} "
+                         f"(known: {' '.join(AREAS)})")
+    seeds = args.seeds if args.seeds is not None else list(range(args.runs))
+    tasks = [(i, a, s, args.preset, args.seconds) for a in args.areas for s in seeds
+             for i in ids]
+    runs = []
+    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+        for run in pool.map(fly, tasks):
+            print(f"{run['area']} seed {run['seed']} {run['planner']}: coverage "
+                  f"{run['coverage']:.3f}, F-score {run['fscore']:.3f}, {run['reason']}",
+                  flush=True)
+            runs.append(run)
+    return runs
+
+
+if __name__ == "__main__":
+    main()
