@@ -131,8 +131,9 @@ class World:
         vel, _ = pybullet.getBaseVelocity(self._body, physicsClientId=cid)
         self.position = np.array(pos)
         self.velocity = np.array(vel)
-        contacts = [c for part in self._scene
-                    for c in pybullet.getContactPoints(self._body, part, physicsClientId=cid)]
+        # The vehicle touches nothing but the scene's parts: one query for all of them, not
+        # one per part (large scenes have a dozen; the deepest contact is the same).
+        contacts = pybullet.getContactPoints(bodyA=self._body, physicsClientId=cid)
         touching = [c for c in contacts if c[8] <= 0.0]
         if not touching:
             return None
