@@ -123,6 +123,8 @@ def measure(area: str, builds: dict[str, Path], args: argparse.Namespace) -> dic
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--old", type=Path, help="a checkout of the build to compare against")
+    parser.add_argument("--new", type=Path, default=ROOT,
+                        help="the build to measure (default: this checkout)")
     parser.add_argument("--areas", nargs="+", default=["all"])
     parser.add_argument("--seconds", type=float, default=300.0)
     parser.add_argument("--planner", default="classic")
@@ -147,7 +149,7 @@ def main() -> None:
     from areas import area_names
 
     names = area_names() if args.areas == ["all"] else args.areas
-    builds = {"old": args.old.resolve(), "new": ROOT}
+    builds = {"old": args.old.resolve(), "new": args.new.resolve()}
     rows = [measure(name, builds, args) for name in names]
     report(rows, args)
 
