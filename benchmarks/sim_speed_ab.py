@@ -8,10 +8,11 @@ Each run is a process of its own with one thread per library (`worker.threads`),
 core when `--core` is given: the build's code is imported from its folder, a 5 s MAZE episode
 loads its numba kernels and measures the reference speed, then one episode is timed. The two
 builds alternate (old first on even repeats), so that both see the same machine load and their
-ratio means something even when absolute times move. Each run reports its peak resident memory
-(the whole process: area, ground truth, maps, the warm-up) and a fingerprint of its result
-without the fields that measure the machine; with `--charge none` the flights are repeatable and
-equal fingerprints show the builds compute the same runs.
+ratio means something even when absolute times move; the process's CPU time (one thread per
+library, so about the wall time on an idle core) moves less with load. Each run reports its
+peak resident memory (the whole process: area, ground truth, maps, the warm-up) and a
+fingerprint of its result without the fields that measure the machine; with `--charge none`
+the flights are repeatable and equal fingerprints show the builds compute the same runs.
 """
 
 from __future__ import annotations
@@ -107,6 +108,7 @@ def measure(area: str, builds: dict[str, Path], args: argparse.Namespace) -> dic
     for name, rs in runs.items():
         row[name] = {
             "realtime_factor": statistics.median(r["realtime_factor"] for r in rs),
+            "cpu_realtime_factor": statistics.median(r["cpu_realtime_factor"] for r in rs),
             "peak_rss_mib": max(r["peak_rss_mib"] for r in rs),
             "frame_costs_ms": {k: statistics.median(r["frame_costs_ms"].get(k, 0.0) for r in rs)
                                for k in STAGES},
@@ -115,6 +117,9 @@ def measure(area: str, builds: dict[str, Path], args: argparse.Namespace) -> dic
     pairs = zip(runs["new"], runs["old"], strict=True)
     row["speedup"] = statistics.median(n["realtime_factor"] / o["realtime_factor"]
                                        for n, o in pairs)
+    row["cpu_speedup"] = statistics.median(
+        n["cpu_realtime_factor"] / o["cpu_realtime_factor"]
+        for n, o in zip(runs["new"], runs["old"], strict=True))
     row["same_flight"] = all(n["fingerprint"] == o["fingerprint"]
                              for n, o in zip(runs["new"], runs["old"], strict=True))
     return row
@@ -158,10 +163,12 @@ def report(rows: list[dict[str, Any]], args: argparse.Namespace) -> None:
     print_table(
         f"{args.planner}, preset {args.preset}, {args.seconds:g} simulated s, seed {args.seed}, "
         f"{args.repeats} run(s) per build, old = {args.old}",
-        ["area", "old sim s / wall s", "new sim s / wall s", "new / old", "old MiB", "new MiB",
-         "same flight"],
+        ["area", "old sim s / wall s", "new", "new / old", "old sim s / CPU s", "new",
+         "new / old", "old MiB", "new MiB", "same flight"],
         [[r["area"], f"{r['old']['realtime_factor']:.1f}", f"{r['new']['realtime_factor']:.1f}",
-          f"{r['speedup']:.2f}", f"{r['old']['peak_rss_mib']:.0f}",
+          f"{r['speedup']:.2f}", f"{r['old']['cpu_realtime_factor']:.1f}",
+          f"{r['new']['cpu_realtime_factor']:.1f}", f"{r['cpu_speedup']:.2f}",
+          f"{r['old']['peak_rss_mib']:.0f}",
           f"{r['new']['peak_rss_mib']:.0f}", "yes" if r["same_flight"] else "no"]
          for r in rows],
     )
