@@ -35,7 +35,8 @@ from worker.threads import thread_environment  # noqa: E402
 
 # Measured on the machine, not simulated: left out of the fingerprint.
 MACHINE_FIELDS = ("wall_seconds", "frame_costs_ms", "planning_time_ms", "reproducibility")
-STAGES = ("render", "occupancy", "tsdf", "physics", "planner", "metrics", "recording", "checks")
+STAGES = ("render", "occupancy", "tsdf", "physics", "planner", "metrics", "recording", "checks",
+          "scoring")
 
 
 def child(args: argparse.Namespace) -> None:
