@@ -156,8 +156,21 @@ def main() -> None:
 
     names = area_names() if args.areas == ["all"] else args.areas
     builds = {"old": args.old.resolve(), "new": args.new.resolve()}
-    rows = [measure(name, builds, args) for name in names]
+    rows: list[dict[str, Any]] = []
+    for name in names:
+        rows.append(measure(name, builds, args))
+        path = save(rows, args)  # after each area, so that a long comparison can be read early
     report(rows, args)
+    print(f"\nwrote {path}")
+
+
+def save(rows: list[dict[str, Any]], args: argparse.Namespace) -> Path:
+    return write_json(args.out, {
+        "command": "python benchmarks/sim_speed_ab.py " + " ".join(sys.argv[1:]),
+        "old": str(args.old), "new": str(args.new), "planner": args.planner,
+        "preset": args.preset, "seconds": args.seconds, "seed": args.seed,
+        "charge": args.charge, "areas": rows,
+    })
 
 
 def report(rows: list[dict[str, Any]], args: argparse.Namespace) -> None:
@@ -178,12 +191,6 @@ def report(rows: list[dict[str, Any]], args: argparse.Namespace) -> None:
         [[r["area"], *(f"{r['new']['frame_costs_ms'][k]:.2f} ({r['old']['frame_costs_ms'][k]:.2f})"
                        for k in STAGES)] for r in rows],
     )
-    path = write_json(args.out, {
-        "command": "python benchmarks/sim_speed_ab.py " + " ".join(sys.argv[1:]),
-        "old": str(args.old), "planner": args.planner, "preset": args.preset,
-        "seconds": args.seconds, "seed": args.seed, "charge": args.charge, "areas": rows,
-    })
-    print(f"\nwrote {path}")
 
 
 if __name__ == "__main__":
