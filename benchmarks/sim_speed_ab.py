@@ -5,7 +5,7 @@
         [--areas all] [--seconds 300] [--planner classic] [--preset default] [--repeats 1]
 
 Each run is a process of its own with one thread per library (`worker.threads`), pinned to one
-core when `--core` is given: the build's code is imported from its folder, a 5 s MAZE episode
+core when `--core` is given: the build's code is imported from its folder, a 20 s MAZE episode
 loads its numba kernels and measures the reference speed, then one episode is timed. The two
 builds alternate (old first on even repeats), so that both see the same machine load and their
 ratio means something even when absolute times move; the process's CPU time (one thread per
@@ -56,8 +56,10 @@ def child(args: argparse.Namespace) -> None:
     config = preset(args.preset)
     if args.charge is not None:
         config = config.model_copy(update={"planning_time_charge": args.charge})
+    # Long enough for the planner's and the safety checks' kernels to load (or compile, in a
+    # fresh checkout) before the timed run.
     warm = load_area("maze")
-    run_episode(warm, load_ground_truth(warm), make(args.planner), config, 0, seconds=5.0)
+    run_episode(warm, load_ground_truth(warm), make(args.planner), config, 0, seconds=20.0)
     area = load_area(args.area)
     truth = load_ground_truth(area)
     started = time.perf_counter()
