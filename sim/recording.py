@@ -91,12 +91,10 @@ class RecordingWriter:
         """Store the reconstructed surface at `time`, thinned to one point per `voxel_m` cell."""
         pts = np.asarray(points, dtype=np.float64)
         if len(pts):
-            cells = np.floor(pts / voxel_m).astype(np.int64)
-            cells -= cells.min(axis=0)
-            span = cells.max(axis=0) + 1
-            keys = (cells[:, 0] * span[1] + cells[:, 1]) * span[2] + cells[:, 2]
-            _, first = np.unique(keys, return_index=True)
-            pts = pts[np.sort(first)]
+            # Imported here: readers of recordings (the web server) need no numba.
+            from sim.point_thinning import first_in_each_cell
+
+            pts = first_in_each_cell(pts, voxel_m)
         self._surface_times.append(time)
         self._surfaces.append(pts.astype(np.float32))
 
