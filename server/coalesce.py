@@ -3,8 +3,8 @@
 A request needs a read that started after it arrived (what a query of its own would give).
 Requests that arrive while a read of the same key runs wait for the next one, which starts as
 soon as that read ends and answers all of them: 200 clients polling one job cost one query
-per round trip of the database, not 200. The same rule as the leaderboard's version check
-(`server.leaderboard._Gate`), for any key.
+per round trip of the database, not 200. The leaderboard's version check
+(`server.leaderboard._Gate`) uses it too.
 """
 
 from __future__ import annotations
@@ -32,7 +32,10 @@ class Coalesced(Generic[K, V]):
         self.loop: asyncio.AbstractEventLoop | None = None
         self.batches: dict[K, _Batch[V]] = {}
 
-    async def get(self, key: K) -> V:
+    async def get(self, key: K, read: Callable[[K], V] | None = None) -> V:
+        """The value of a read of `key` that started after this call; `read`, if given, is
+        used in place of the constructor's when this call starts the read (callers sharing a
+        key must pass equivalent reads)."""
         loop = asyncio.get_running_loop()
         if self.loop is not loop:  # a new event loop (tests): nothing carries over
             self.loop, self.batches = loop, {}
@@ -42,15 +45,15 @@ class Coalesced(Generic[K, V]):
         waiter: asyncio.Future[V] = loop.create_future()
         batch.waiters.append(waiter)
         if batch.task is None:
-            batch.task = loop.create_task(self._drain(key, batch))
+            batch.task = loop.create_task(self._drain(key, batch, read or self.read))
         return await waiter
 
-    async def _drain(self, key: K, batch: _Batch[V]) -> None:
+    async def _drain(self, key: K, batch: _Batch[V], read: Callable[[K], V]) -> None:
         try:
             while batch.waiters:
                 waiters, batch.waiters = batch.waiters, []
                 try:
-                    value = await asyncio.to_thread(self.read, key)
+                    value = await asyncio.to_thread(read, key)
                 except Exception as exc:
                     for w in waiters:
                         if not w.done():

@@ -37,6 +37,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from server.board_statistics import INFO as STATISTICS
 from server.board_statistics import Cell, annotate, describe
+from server.coalesce import Coalesced
 from server.db import read_only
 from server.models import AreaRow, Job, PlannerRow, Run, RunResult, RunState
 from server.schemas import Leaderboard, LeaderboardEntry, LeaderboardPlanner, MetricOut
@@ -112,36 +113,18 @@ class _Gate:
 
     def __init__(self) -> None:
         self.loop: asyncio.AbstractEventLoop | None = None
-        self.waiters: list[asyncio.Future[Version]] = []
-        self.task: asyncio.Task[None] | None = None
+        self.checks: Coalesced[None, Version] = Coalesced(_no_check)
         self.computing: dict[tuple[str, str | None], asyncio.Lock] = {}
 
     async def version(self, check: Callable[[], Version]) -> Version:
         loop = asyncio.get_running_loop()
         if self.loop is not loop:  # a new event loop (tests): nothing carries over
-            self.loop, self.waiters, self.task, self.computing = loop, [], None, {}
-        waiter: asyncio.Future[Version] = loop.create_future()
-        self.waiters.append(waiter)
-        if self.task is None:
-            self.task = loop.create_task(self._drain(check))
-        return await waiter
+            self.loop, self.computing = loop, {}
+        return await self.checks.get(None, lambda _: check())
 
-    async def _drain(self, check: Callable[[], Version]) -> None:
-        try:
-            while self.waiters:
-                waiters, self.waiters = self.waiters, []
-                try:
-                    version = await asyncio.to_thread(check)
-                except Exception as exc:
-                    for w in waiters:
-                        if not w.done():
-                            w.set_exception(exc)
-                else:
-                    for w in waiters:
-                        if not w.done():
-                            w.set_result(version)
-        finally:
-            self.task = None
+
+def _no_check(_: None) -> Version:
+    raise AssertionError("every version check passes its own read")
 
 
 class _Store:
