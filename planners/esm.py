@@ -300,6 +300,7 @@ class Esm(Planner):
         gains best-first (stale gains are upper bounds); (-1, 0) for a lone root."""
         if tree.size < 2:
             return -1, 0.0
+        refreshable = self._refreshable(tree)
         while True:
             g, c, _ = tree.accumulate()
             ratio = np.where(c > 0.0, g / np.maximum(c, 1e-12), 0.0)
@@ -307,10 +308,16 @@ class Esm(Planner):
             end = int(np.argmax(ratio))
             branch = tree.path(end)[1:]
             stale = branch[tree.stamps[branch] < now]
+            if refreshable is not None:
+                stale = stale[refreshable[stale]]
             if len(stale) == 0:
                 return int(branch[0]), float(ratio[end])
             for node in stale:
                 self.refresh(tree, view, int(node), now)
+
+    def _refreshable(self, tree: SegmentTree) -> npt.NDArray[np.bool_] | None:
+        """(N,) which nodes' stale gains `select` recomputes; None: every node's."""
+        return None
 
     def _back_track(self, obs: Observation, info: dict[str, float | int | str]) -> Plan:
         """Fly back to the last position on the stack that can be reached."""

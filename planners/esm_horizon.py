@@ -130,28 +130,15 @@ class EsmHorizon(Esm):
             return None
         return point
 
-    def select(self, tree: SegmentTree, view: MapView, now: float) -> tuple[int, float]:
-        """The root's child leading to the best branch, recomputing stale gains best-first,
-        but only of nodes within `update_range_m` of the root: farther gains stay as they were
-        (the original's update range)."""
+    def _refreshable(self, tree: SegmentTree) -> npt.NDArray[np.bool_] | None:
+        """Only nodes within `update_range_m` of the root have their stale gains recomputed:
+        farther gains stay as they were (the original's update range)."""
         reach = self.config.update_range_m
         if reach is None:
-            return super().select(tree, view, now)
-        if tree.size < 2:
-            return -1, 0.0
+            return None
         root = tree.positions[tree.root]
-        near = np.sum((tree.positions - root) ** 2, axis=1) <= reach * reach
-        while True:
-            g, c, _ = tree.accumulate()
-            ratio = np.where(c > 0.0, g / np.maximum(c, 1e-12), 0.0)
-            ratio[tree.root] = -math.inf
-            end = int(np.argmax(ratio))
-            branch = tree.path(end)[1:]
-            stale = branch[(tree.stamps[branch] < now) & near[branch]]
-            if len(stale) == 0:
-                return int(branch[0]), float(ratio[end])
-            for node in stale:
-                self.refresh(tree, view, int(node), now)
+        near: npt.NDArray[np.bool_] = np.sum((tree.positions - root) ** 2, axis=1) <= reach * reach
+        return near
 
 
 class EsmReconHorizon(EsmHorizon):
