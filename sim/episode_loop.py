@@ -365,7 +365,7 @@ class EpisodeLoop:
         metrics: dict[str, float | None] = {}
         for measure in self.measures:
             metrics.update(measure.scalars(done[measure.name]))
-        self.costs.scoring += time.perf_counter() - t0
+        self.costs.metrics += time.perf_counter() - t0
         succeeded = ending.status is RunStatus.SUCCEEDED
         volume, recall = done["explored_volume"], done["recall_series"]
         mesh = done["reconstruction"]

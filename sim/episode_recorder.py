@@ -11,9 +11,6 @@ from areas.area import Area
 from sim.config import EpisodeConfig
 from sim.recording import RecordingWriter
 from sim.sensing import Sensing
-from sim.voxel_grid import DirtyBoxSubscription, IndexBox
-
-_NOTHING = IndexBox((0, 0, 0), (0, 0, 0))
 
 
 class EpisodeRecorder:
@@ -32,7 +29,6 @@ class EpisodeRecorder:
         self.next_keyframe = 0.0
         self.last_keyframe: float | None = None
         self.next_surface = config.surface_snapshot_interval_s
-        self._changes: DirtyBoxSubscription | None = None
 
     def pose(self, now: float, position: np.ndarray, yaw: float) -> None:
         """After a physics step: the true pose, at the recording's pose rate."""
@@ -51,14 +47,7 @@ class EpisodeRecorder:
             self.next_surface += self.cfg.surface_snapshot_interval_s
 
     def _keyframe(self, stamp: float, sensing: Sensing) -> None:
-        occupancy = sensing.mapping.occupancy
-        if self._changes is None:
-            # Compared from now on only where states changed since the previous keyframe.
-            self._changes = occupancy.subscribe()
-            self.writer.map_keyframe(stamp, occupancy.state)
-        else:
-            box = self._changes.take()
-            self.writer.map_keyframe(stamp, occupancy.state, box or _NOTHING)
+        self.writer.map_keyframe(stamp, sensing.mapping.occupancy.state)
         self.last_keyframe = stamp
 
     def finish(self, now: float, sensing: Sensing) -> None:

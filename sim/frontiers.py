@@ -48,20 +48,18 @@ class FrontierCluster:
 
 @numba.njit(cache=True)
 def _frontier_box(
-    state: StateGrid, frontier: BoolGrid, rows: npt.NDArray[np.int32],
+    state: StateGrid, frontier: BoolGrid,
     lo0: int, lo1: int, lo2: int, hi0: int, hi1: int, hi2: int,
 ) -> int:
     """Recompute `frontier` on the half-open box [lo, hi) from `state`.
 
-    state: (nx, ny, nz) uint8 `VoxelState`; frontier: (nx, ny, nz) bool, written in the box;
-    rows: (nx, ny) frontier voxels per row (i, j, :), kept up to date.
+    state: (nx, ny, nz) uint8 `VoxelState`; frontier: (nx, ny, nz) bool, written in the box.
     Returns the change in the number of frontier voxels.
     """
     nx, ny, nz = state.shape
     delta = 0
     for i in range(lo0, hi0):
         for j in range(lo1, hi1):
-            row = 0
             for k in range(lo2, hi2):
                 f = False
                 if state[i, j, k] == _FREE:
@@ -73,10 +71,8 @@ def _frontier_box(
                         or (k > 0 and state[i, j, k - 1] == _UNKNOWN)
                         or (k + 1 < nz and state[i, j, k + 1] == _UNKNOWN)
                     )
-                row += int(f) - int(frontier[i, j, k])
+                delta += int(f) - int(frontier[i, j, k])
                 frontier[i, j, k] = f
-            rows[i, j] += row
-            delta += row
     return delta
 
 
@@ -187,17 +183,13 @@ def _label_boxes(indices: IndexArray, labels: IndexArray, n: int) -> tuple[Index
 
 
 @numba.njit(cache=True)
-def _true_indices(mask: BoolGrid, count: int, rows: npt.NDArray[np.int32]) -> IndexArray:
-    """(count, 3) int64 indices of the True voxels of `mask`, in C order; count is their number
-    and rows (nx, ny) their number per row (i, j, :): rows without any are skipped, so the cost
-    grows with the rows holding some, not with the grid."""
+def _true_indices(mask: BoolGrid, count: int) -> IndexArray:
+    """(count, 3) int64 indices of the True voxels of `mask`, in C order; count is their number."""
     nx, ny, nz = mask.shape
     out = np.empty((count, 3), dtype=np.int64)
     p = 0
     for i in range(nx):
         for j in range(ny):
-            if rows[i, j] == 0:
-                continue
             for k in range(nz):
                 if mask[i, j, k]:
                     out[p, 0] = i
@@ -236,7 +228,6 @@ class FrontierTracker:
         self._map = occupancy
         self._subscription = occupancy.subscribe()
         self._frontier = np.zeros(occupancy.shape, dtype=bool)
-        self._rows = np.zeros(occupancy.shape[:2], dtype=np.int32)
         self._count = 0
         self._lookup = np.full(occupancy.shape, -1, dtype=np.int32)  # scratch for clustering
         self.full_recompute()
@@ -271,14 +262,13 @@ class FrontierTracker:
         """Recompute the whole frontier grid."""
         self._subscription.take()
         self._frontier[...] = False
-        self._rows[...] = 0
         self._count = 0
         self._recompute(IndexBox.full(self._map.shape))
 
     def _recompute(self, region: IndexBox) -> None:
         lo, hi = region.lo, region.hi
         self._count += int(
-            _frontier_box(self._map.state, self._frontier, self._rows,
+            _frontier_box(self._map.state, self._frontier,
                           lo[0], lo[1], lo[2], hi[0], hi[1], hi[2])
         )
 
@@ -296,7 +286,7 @@ class FrontierTracker:
         self.update()
         if self._count == 0:
             return []
-        indices = _true_indices(self._frontier, self._count, self._rows)  # (F, 3), C order
+        indices = _true_indices(self._frontier, self._count)  # (F, 3), C order
         components, n = _connected(indices, np.zeros(len(indices), dtype=np.int64),
                                    self._lookup)
         keys = _cell_keys(indices, components, n, max_extent_m / self._map.voxel_size)

@@ -3,9 +3,7 @@ surface voxel has been measured.
 
 `MappingStack` owns the occupancy map, the surface observation layers and the trackers that
 follow the map; `MapView` is the read-only
-face handed to planners. Trackers and masks are refreshed lazily, when a planner first asks, and
-only where the map changed: like `traversable`, `free` and `occupied` are views of grids kept
-by the stack, valid until the next integration.
+face handed to planners. Trackers are refreshed lazily, when a planner first asks.
 """
 
 from __future__ import annotations
@@ -41,46 +39,10 @@ class MappingStack:
         self.surface = SurfaceObservations(self.occupancy)
         self.frontiers = FrontierTracker(self.occupancy)
         self.traversability = TraversabilityTracker(self.occupancy, safety_radius_m)
-        self.masks = StateMasks(self.occupancy)
 
     def view(self) -> MapView:
         """A read-only snapshot-in-time view; valid until the next integration."""
         return MapView(self)
-
-
-class StateMasks:
-    """The FREE and OCCUPIED masks of an occupancy map, recomputed only in the box of voxels
-    whose state changed since they were last asked for, as the trackers are."""
-
-    def __init__(self, occupancy: OccupancyMap) -> None:
-        self._map = occupancy
-        self._changes = occupancy.subscribe()
-        state = occupancy.state
-        self._free = state == VoxelState.FREE
-        self._occupied = state == VoxelState.OCCUPIED
-
-    def update(self) -> None:
-        box = self._changes.take()
-        if box is None:
-            return
-        region = box.slices()
-        state = self._map.state[region]
-        np.equal(state, VoxelState.FREE, out=self._free[region])
-        np.equal(state, VoxelState.OCCUPIED, out=self._occupied[region])
-
-    @property
-    def free(self) -> BoolGrid:
-        """(nx, ny, nz) True on known free voxels, a read-only view as of the last update."""
-        view = self._free.view()
-        view.setflags(write=False)
-        return view
-
-    @property
-    def occupied(self) -> BoolGrid:
-        """(nx, ny, nz) True on occupied voxels, a read-only view as of the last update."""
-        view = self._occupied.view()
-        view.setflags(write=False)
-        return view
 
 
 class MapView:
@@ -100,10 +62,6 @@ class MapView:
     @cached_property
     def free(self) -> BoolGrid:
         """(nx, ny, nz) True on known free voxels."""
-        masks = getattr(self._stack, "masks", None)
-        if masks is not None:
-            masks.update()
-            return masks.free
         mask = self.state == VoxelState.FREE
         mask.setflags(write=False)
         return mask
@@ -111,10 +69,6 @@ class MapView:
     @cached_property
     def occupied(self) -> BoolGrid:
         """(nx, ny, nz) True on occupied voxels."""
-        masks = getattr(self._stack, "masks", None)
-        if masks is not None:
-            masks.update()
-            return masks.occupied
         mask = self.state == VoxelState.OCCUPIED
         mask.setflags(write=False)
         return mask

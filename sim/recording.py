@@ -17,8 +17,6 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from sim.voxel_grid import IndexBox
-
 FORMAT = "flybo-recording"
 VERSION = 1
 
@@ -57,31 +55,17 @@ class RecordingWriter:
         self._pose_times.append(time)
         self._poses.append(np.array([*position, yaw], dtype=np.float32))
 
-    def map_keyframe(self, time: float, state: npt.NDArray[np.uint8],
-                     within: IndexBox | None = None) -> None:
-        """Store the voxels whose state changed since the previous keyframe.
-
-        `within`: a box holding every voxel that may have changed since then, so that only it
-        is compared (the map's dirty box); None compares the whole grid."""
-        if self._previous_state is None or within is None:
-            flat = state.reshape(-1)
-            if self._previous_state is None:
-                changed = np.flatnonzero(flat)
-            else:
-                changed = np.flatnonzero(flat != self._previous_state.reshape(-1))
-            self._previous_state = state.copy()
-            values = flat[changed]
+    def map_keyframe(self, time: float, state: npt.NDArray[np.uint8]) -> None:
+        """Store the voxels whose state changed since the previous keyframe."""
+        flat = state.reshape(-1)
+        if self._previous_state is None:
+            changed = np.flatnonzero(flat)
         else:
-            region = within.slices()
-            now, before = state[region], self._previous_state[region]
-            local = np.nonzero(now != before)  # C order in the box is C order in the grid
-            values = now[local]
-            changed = np.ravel_multi_index(
-                tuple(axis + lo for axis, lo in zip(local, within.lo, strict=True)), state.shape)
-            before[...] = now
+            changed = np.flatnonzero(flat != self._previous_state)
+        self._previous_state = flat.copy()
         self._key_times.append(time)
         self._key_indices.append(changed.astype(np.uint32))
-        self._key_states.append(values.astype(np.uint8))
+        self._key_states.append(flat[changed].astype(np.uint8))
 
     def plan(self, time: float, waypoints: np.ndarray) -> None:
         self._plan_times.append(time)
@@ -91,10 +75,12 @@ class RecordingWriter:
         """Store the reconstructed surface at `time`, thinned to one point per `voxel_m` cell."""
         pts = np.asarray(points, dtype=np.float64)
         if len(pts):
-            # Imported here: readers of recordings (the web server) need no numba.
-            from sim.point_thinning import first_in_each_cell
-
-            pts = first_in_each_cell(pts, voxel_m)
+            cells = np.floor(pts / voxel_m).astype(np.int64)
+            cells -= cells.min(axis=0)
+            span = cells.max(axis=0) + 1
+            keys = (cells[:, 0] * span[1] + cells[:, 1]) * span[2] + cells[:, 2]
+            _, first = np.unique(keys, return_index=True)
+            pts = pts[np.sort(first)]
         self._surface_times.append(time)
         self._surfaces.append(pts.astype(np.float32))
 

@@ -16,7 +16,6 @@ import numpy.typing as npt
 from sim.config import EpisodeConfig
 from sim.flight import Flight
 from sim.map_view import MappingStack
-from sim.occupancy import StateGrid
 from sim.search_checks import path_meets_new_obstacle
 from sim.stage_costs import StageCosts
 from sim.trajectory import TrajectoryError, stop_trajectory
@@ -27,24 +26,13 @@ class SafetyMonitor:
 
     def __init__(self, config: EpisodeConfig, mapping: MappingStack, costs: StageCosts) -> None:
         self.cfg, self.mapping, self.costs = config, mapping, costs
-        # The map the guarded flight was checked on. One flight is guarded at a time (a new
-        # one replaces it), so one copy serves them all, brought up to date where states
-        # changed since the previous guard rather than copied whole.
-        self._checked_on: StateGrid | None = None
-        self._changes = mapping.occupancy.subscribe()
 
     def guard(self, flight: Flight, occupancy_updates: int) -> None:
         """Keep the map `flight` was checked on (when the preset turns safety stops on)."""
         if not self.cfg.safety_stops:
             return
         t0 = time.perf_counter()
-        occ = self.mapping.occupancy
-        box = self._changes.take()
-        if self._checked_on is None:
-            self._checked_on = occ.copy_state()
-        elif box is not None:
-            self._checked_on[box.slices()] = occ.state[box.slices()]
-        flight.checked_on = self._checked_on
+        flight.checked_on = self.mapping.occupancy.copy_state()
         flight.checked_at_update = occupancy_updates
         self.costs.checks += time.perf_counter() - t0
 

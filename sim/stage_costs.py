@@ -4,8 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-STAGES = ("render", "occupancy", "tsdf", "physics", "planner", "metrics", "recording", "checks",
-          "scoring")
+STAGES = ("render", "occupancy", "tsdf", "physics", "planner", "metrics", "recording", "checks")
 
 
 @dataclass
@@ -20,9 +19,6 @@ class StageCosts:
     metrics: float = 0.0
     recording: float = 0.0
     checks: float = 0.0  # the in-flight check of the rest of the path (safety stops)
-    # The measures' results once the run has ended (mesh, surface scores against the truth):
-    # a cost per run, apart from `metrics`, the measures' updates at every frame.
-    scoring: float = 0.0
     frames: int = 0
 
     def per_frame_ms(self) -> dict[str, float]:

@@ -53,7 +53,7 @@ def direction_sector(dx: npt.ArrayLike, dy: npt.ArrayLike) -> npt.NDArray[np.int
 
 @numba.njit(cache=True)
 def _observe(camera: FloatArray, points: FloatArray, grid_origin: FloatArray, voxel_size: float,
-             weight: ByteGrid, directions: ByteGrid, stamp: npt.NDArray[np.int32], frame: int,
+             weight: ByteGrid, directions: ByteGrid, stamp: npt.NDArray[np.int64], frame: int,
              box: npt.NDArray[np.int64]) -> None:
     nx, ny, nz = weight.shape
     for p in range(points.shape[0]):
@@ -89,7 +89,7 @@ class SurfaceObservations:
         self._occupancy = occupancy
         self._weight = np.zeros(occupancy.shape, dtype=np.uint8)
         self._directions = np.zeros(occupancy.shape, dtype=np.uint8)
-        self._stamp: npt.NDArray[np.int32] | None = None  # allocated by the first `observe`
+        self._stamp: npt.NDArray[np.int64] | None = None  # allocated by the first `observe`
         self._frame = 0
         self._subscriptions: weakref.WeakSet[DirtyBoxSubscription] = weakref.WeakSet()
 
@@ -111,8 +111,7 @@ class SurfaceObservations:
         """Record one fused frame: `points` (N, 3) are its surface returns, world metres, seen
         from `camera` (3,). Returns the box of voxels it touched (also sent to subscribers)."""
         if self._stamp is None:
-            # Four bytes a voxel: a run fuses far fewer than 2^31 frames.
-            self._stamp = np.full(self._weight.size, -1, dtype=np.int32)
+            self._stamp = np.full(self._weight.size, -1, dtype=np.int64)
         self._frame += 1
         box = np.array([np.iinfo(np.int64).max] * 3 + [-1] * 3, dtype=np.int64)
         _observe(np.ascontiguousarray(camera, dtype=np.float64).reshape(3),

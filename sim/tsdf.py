@@ -120,12 +120,9 @@ class TsdfVolume:
         frac = scaled - base
         tsdf_all = self._grid.attribute("tsdf").reshape((-1,))
         weight_all = self._grid.attribute("weight").reshape((-1,))
-        corners = [np.array(corner) for corner in np.ndindex(2, 2, 2)]
-        # The eight corners' voxels are looked up in one pass over the hash map.
-        values, weights = self._samples(np.concatenate([base + off for off in corners]),
-                                        tsdf_all, weight_all)
-        for c, off in enumerate(corners):
-            value, w = values[c * n:(c + 1) * n], weights[c * n:(c + 1) * n]
+        for corner in np.ndindex(2, 2, 2):
+            off = np.array(corner)
+            value, w = self._samples(base + off, tsdf_all, weight_all)
             tri = np.prod(np.where(off == 1, frac, 1.0 - frac), axis=1)
             sdf += tri * value
             weight = np.minimum(weight, w)

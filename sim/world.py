@@ -115,17 +115,15 @@ class World:
     def step(self, reference: TrajectorySample) -> Contact | None:
         """Advance one physics step tracking `reference`; the contact if the sphere touched."""
         cfg, cid = self.config, self._client
-        # Per axis in Python floats: the same operations in the same order as on the arrays
-        # (so the same bits), without the overhead of numpy on three numbers.
-        kp, kd, mass = cfg.kp, cfg.kd, self.limits.mass_kg
-        ref_p, ref_v = reference.position.tolist(), reference.velocity.tolist()
-        ref_a, here = reference.acceleration.tolist(), self.position.tolist()
-        velocity = self.velocity.tolist()
-        force = [mass * ((ref_a[a] + kp * (ref_p[a] - here[a]) + kd * (ref_v[a] - velocity[a]))
-                         + lift)
-                 for a, lift in enumerate((0.0, 0.0, GRAVITY))]
+        accel = (
+            reference.acceleration
+            + cfg.kp * (reference.position - self.position)
+            + cfg.kd * (reference.velocity - self.velocity)
+        )
+        force = self.limits.mass_kg * (accel + np.array([0.0, 0.0, GRAVITY]))
         pybullet.applyExternalForce(
-            self._body, -1, force, here, pybullet.WORLD_FRAME, physicsClientId=cid,
+            self._body, -1, force.tolist(), self.position.tolist(), pybullet.WORLD_FRAME,
+            physicsClientId=cid,
         )
         pybullet.stepSimulation(physicsClientId=cid)
         self.time += self.dt
@@ -133,9 +131,8 @@ class World:
         vel, _ = pybullet.getBaseVelocity(self._body, physicsClientId=cid)
         self.position = np.array(pos)
         self.velocity = np.array(vel)
-        # The vehicle touches nothing but the scene's parts: one query for all of them, not
-        # one per part (large scenes have a dozen; the deepest contact is the same).
-        contacts = pybullet.getContactPoints(bodyA=self._body, physicsClientId=cid)
+        contacts = [c for part in self._scene
+                    for c in pybullet.getContactPoints(self._body, part, physicsClientId=cid)]
         touching = [c for c in contacts if c[8] <= 0.0]
         if not touching:
             return None
