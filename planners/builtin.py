@@ -15,7 +15,7 @@ from __future__ import annotations
 from planners.aep import Aep, AepV1, AepV3
 from planners.api import Planner
 from planners.classic import Classic, ClassicV2
-from planners.esm import Esm, EsmRecon
+from planners.esm import EsmRecon, EsmV1
 from planners.esm_horizon import EsmHorizon, EsmReconHorizon
 from planners.falcon import Falcon
 from planners.fuel import Fuel
@@ -100,7 +100,7 @@ BUILTINS: tuple[tuple[str, int, type[Planner], str, str], ...] = (
         _SPLAT_REFERENCE,
     ),
     (
-        "esm-ipp", 1, Esm,
+        "esm-ipp", 1, EsmV1,
         "One persistent RRT* tree of segments grown at every call, valued by the "
         "unknown volume seen per second of flight along each branch; flies the best root child, "
         "re-roots there, recomputes stale gains lazily, back-tracks when nothing is worth flying.",

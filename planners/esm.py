@@ -353,6 +353,11 @@ class Esm(Planner):
         return waypoints
 
 
+class EsmV1(Esm):
+    """esm-ipp-v1, kept registered so that its stored results stay comparable and re-runnable;
+    later versions share `Esm` with it, never this class."""
+
+
 class EsmRecon(Esm):
     """ESM-Recon: `Esm` with the reconstruction gain."""
 

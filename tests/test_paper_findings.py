@@ -4,9 +4,14 @@ comparison of a set of runs."""
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
 from typing import Any
 
 import pytest
+
+# The benchmark scripts are not an installed package: they run from the project folder.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.paper_findings import compare, our_cells, paper_cells
 from benchmarks.paper_reference import (
