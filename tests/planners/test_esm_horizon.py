@@ -40,7 +40,7 @@ def test_registered_beside_v1_with_their_gains() -> None:
     assert spec("esm-recon").id == "esm-recon-v2"
     assert make("esm-ipp-v2").config.gain == "volumetric"  # type: ignore[attr-defined]
     assert make("esm-recon-v2").config.gain == "reconstruction"  # type: ignore[attr-defined]
-    assert type(make("esm-ipp-v1")).__name__ == "Esm"
+    assert type(make("esm-ipp-v1")).__name__ == "EsmV1"
 
 
 def test_the_large_area_tree_applies_on_coarse_maps_only() -> None:
