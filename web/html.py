@@ -81,15 +81,27 @@ def td(text: str, sort: float | str | None = None, cls: str = "") -> str:
     return f"<td{attrs}>{text}</td>"
 
 
+CI_TITLE = "95 % confidence interval of the mean (percentile bootstrap over runs)"
+
+
+def ci_span(low: float | None, high: float | None, digits: int, scale: float = 1.0) -> str:
+    """A 95 % interval shown after a mean, or nothing when there is none (a single run)."""
+    if low is None or high is None:
+        return ""
+    return (f"<span class='ci' title='{CI_TITLE}'>[{num(low, digits, scale)}, "
+            f"{num(high, digits, scale)}]</span>")
+
+
 def spread_td(s: Spread, digits: int = 2, scale: float = 1.0) -> str:
-    """Mean over runs, with the range from the smallest to the largest run below it."""
+    """Mean over runs, its 95 % interval, and the range from the smallest to the largest run."""
     if s.mean is None:
         return td(DASH, None)
     rng = ""
     if s.min is not None and s.max is not None and s.max != s.min:
         rng = (f"<span class='range'>{num(s.min, digits, scale)}{DASH}"
                f"{num(s.max, digits, scale)}</span>")
-    return td(f"{num(s.mean, digits, scale)}{rng}", s.mean, "num")
+    ci = ci_span(s.ci_low, s.ci_high, digits, scale)
+    return td(f"{num(s.mean, digits, scale)}{ci}{rng}", s.mean, "num")
 
 
 def table(caption: str, headers: list[tuple[str, str]], rows: list[str], *,

@@ -35,9 +35,20 @@ from server.schemas import (
     LeaderboardEntry,
     LeaderboardPlanner,
     MetricOut,
-    Spread,
 )
-from web.html import DASH, esc, not_found, num, options, page, planner_link, table, td
+from web.html import (
+    DASH,
+    ci_span,
+    esc,
+    not_found,
+    num,
+    options,
+    page,
+    planner_link,
+    spread_td,
+    table,
+    td,
+)
 from web.jobs_page import recent_jobs_table
 
 router = APIRouter(include_in_schema=False)
@@ -72,31 +83,9 @@ def _entry_map(board: Leaderboard) -> dict[tuple[str, str], LeaderboardEntry]:
     return {(e.planner, e.area): e for e in board.entries}
 
 
-CI_TITLE = "95 % confidence interval of the mean (percentile bootstrap over runs)"
-
-
-def _ci(low: float | None, high: float | None, digits: int, scale: float = 1.0) -> str:
-    if low is None or high is None:
-        return ""
-    return (f"<span class='ci' title='{CI_TITLE}'>[{num(low, digits, scale)}, "
-            f"{num(high, digits, scale)}]</span>")
-
-
-def spread_td(s: Spread, digits: int = 2, scale: float = 1.0) -> str:
-    """Mean over runs, its 95 % interval, and the range from the smallest to the largest run."""
-    if s.mean is None:
-        return td(DASH, None)
-    rng = ""
-    if s.min is not None and s.max is not None and s.max != s.min:
-        rng = (f"<span class='range'>{num(s.min, digits, scale)}{DASH}"
-               f"{num(s.max, digits, scale)}</span>")
-    return td(f"{num(s.mean, digits, scale)}{_ci(s.ci_low, s.ci_high, digits, scale)}{rng}",
-              s.mean, "num")
-
-
 def _mean_td(value: float | None, interval: Interval | None, digits: int,
              scale: float = 1.0) -> str:
-    ci = "" if interval is None else _ci(interval.low, interval.high, digits, scale)
+    ci = "" if interval is None else ci_span(interval.low, interval.high, digits, scale)
     return td(f"{num(value, digits, scale)}{ci}", value, "num")
 
 
