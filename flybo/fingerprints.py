@@ -1,6 +1,6 @@
 """The hashes that name the benchmark's code: one SHA-256 per component (``sim``, ``presets``,
-``areas``) and a fingerprint per planner; `flybo.versions` describes what each covers and holds
-them to the lock file."""
+``areas``, ``libraries``) and a fingerprint per planner; `flybo.versions` describes what each
+covers and holds them to the lock file."""
 
 from __future__ import annotations
 
@@ -8,13 +8,18 @@ import dataclasses
 import enum
 import functools
 import hashlib
+import importlib.metadata
 import json
 from collections.abc import Callable
 from typing import Any
 
 from flybo.module_sources import closure, package_sources, sorted_sources
 
-COMPONENTS = ("sim", "presets", "areas")
+COMPONENTS = ("sim", "presets", "areas", "libraries")
+# The installed libraries whose numbers shape a flight (ray casting, integration, physics,
+# trajectories, planners' numerics): the same code flies differently with another release of
+# one of them, so their versions are part of the benchmark version (pinned in pyproject.toml).
+FLIGHT_LIBRARIES = ("numpy", "numba", "open3d", "pybullet", "ruckig", "scipy")
 # Planner dependencies outside these are not followed (see `flybo.versions`).
 _PLANNER_PACKAGES = ("planners",)
 _PLANNER_EXTRA_MODULES = ("sim.interface",)
@@ -89,14 +94,24 @@ def _areas_hash() -> str:
     return sha256_of({"sources": sorted_sources(modules), "areas": scenes})
 
 
+def library_versions() -> dict[str, str]:
+    """{distribution: installed version} of each of `FLIGHT_LIBRARIES`."""
+    return {name: importlib.metadata.version(name) for name in FLIGHT_LIBRARIES}
+
+
+def _libraries_hash() -> str:
+    return sha256_of(library_versions())
+
+
 _COMPONENT_HASHES: dict[str, Callable[[], str]] = {
     "sim": _sim_hash, "presets": _presets_hash, "areas": _areas_hash,
+    "libraries": _libraries_hash,
 }
 
 
 def component_hashes() -> dict[str, str]:
-    """SHA-256 of each component of the benchmark in this tree: ``sim``, ``presets``, ``areas``.
-    """
+    """SHA-256 of each component of the benchmark in this tree: ``sim``, ``presets``, ``areas``
+    and the installed ``libraries``."""
     return {name: _COMPONENT_HASHES[name]() for name in COMPONENTS}
 
 

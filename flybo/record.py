@@ -25,10 +25,11 @@ from typing import Any
 
 from areas.area import Area
 from flybo import versions
+from flybo.fingerprints import FLIGHT_LIBRARIES
 from sim.config import EpisodeConfig
 
 RECORD_VERSION = 1
-LIBRARIES = ("numpy", "numba", "open3d", "pybullet", "ruckig", "scipy")
+LIBRARIES = FLIGHT_LIBRARIES
 _SOURCE_PACKAGES = ("sim", "planners", "areas")
 _ROOT = Path(__file__).resolve().parents[1]
 

@@ -11,7 +11,11 @@ presets and areas, and by the same planner code. This module names that code:
   - ``areas``: the sources of ``areas/registry.py`` and ``areas/ground_truth.py`` and of every
     module under ``areas/`` they import, transitively (the generators of the built-in areas are
     imported by the registry), plus the canonical JSON of each built-in area's name, generator
-    and parameters (layout seed included).
+    and parameters (layout seed included);
+  - ``libraries``: the installed versions of the libraries whose numbers shape a flight
+    (``FLIGHT_LIBRARIES``: numpy, numba, Open3D, pybullet, ruckig, SciPy). The same code flies
+    differently with another release of one of them, so they are pinned exactly in
+    ``pyproject.toml``, and an environment with other releases runs a ``+modified`` version.
 
 - `benchmark_version()`: the short human name of those components (``2026.12-1``: year, month,
   and a counter), read from the lock file. When the tree's components differ from the lock's,

@@ -55,14 +55,41 @@ def test_lock_matches_the_tree(tree: dict[str, Any]) -> None:
 def test_lock_holds_every_builtin_planner_and_component(tree: dict[str, Any]) -> None:
     from planners.registry import specs
 
-    assert set(tree["components"]) == {"sim", "presets", "areas"}
+    assert set(tree["components"]) == {"sim", "presets", "areas", "libraries"}
     assert set(tree["planners"]) == {s.id for s in specs() if s.builtin}
     assert {"classic-v1", "aep-v1", "aep-v2"} <= set(tree["planners"])
     for digest in [*tree["components"].values(), *tree["planners"].values()]:
         assert len(digest) == 64 and int(digest, 16) >= 0
 
 
-@pytest.mark.parametrize("component", ["sim", "presets", "areas"])
+def test_the_flight_libraries_installed_are_the_pinned_releases() -> None:
+    """The environment runs the benchmark version only with the releases `pyproject.toml` pins."""
+    import tomllib
+
+    pyproject = Path(__file__).resolve().parents[1] / "pyproject.toml"
+    pins = {}
+    for requirement in tomllib.loads(pyproject.read_text())["project"]["dependencies"]:
+        name, sep, release = requirement.partition("==")
+        if sep:
+            pins[name.strip()] = release.strip()
+    assert set(pins) == set(fingerprints.FLIGHT_LIBRARIES)
+    assert fingerprints.library_versions() == pins
+
+
+def test_another_library_release_is_another_version(tree: dict[str, Any],
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    installed = fingerprints.library_versions()
+    monkeypatch.setattr(fingerprints, "library_versions",
+                        lambda: {**installed, "numpy": installed["numpy"] + ".post1"})
+    components = component_hashes()
+    assert components["libraries"] != tree["components"]["libraries"]
+    assert {k: v for k, v in components.items() if k != "libraries"} == {
+        k: v for k, v in tree["components"].items() if k != "libraries"}
+    (problem,) = check_lock(_lock(tree), components, tree["planners"])
+    assert "component 'libraries' changed" in problem
+
+
+@pytest.mark.parametrize("component", ["sim", "presets", "areas", "libraries"])
 def test_changed_component_without_a_bump_names_it(tree: dict[str, Any], component: str) -> None:
     lock = _lock(tree)
     lock["components"][component] = "0" * 64
