@@ -42,14 +42,17 @@ def migrated(settings: Settings) -> sessionmaker[Session]:
 
 def run_tokens(args: argparse.Namespace) -> None:
     from server.db import session_scope  # SQLAlchemy: on use
-    from server.security import create_token
+    from server.security import ReservedUserError, create_token
 
     settings = cli_settings()
     name = args.user.strip()
     if not name or len(name) > 64:
         raise CliError("--user must be 1 to 64 characters")
-    with session_scope(migrated(settings)) as session:
-        token = create_token(session, name, settings.secret_key, admin=args.admin)
+    try:
+        with session_scope(migrated(settings)) as session:
+            token = create_token(session, name, settings.secret_key, admin=args.admin)
+    except ReservedUserError as exc:
+        raise CliError(f"--user: {exc}") from None
     print(token)
 
 

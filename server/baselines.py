@@ -44,8 +44,8 @@ from server.models import (
     RunState,
     User,
 )
+from server.security import REFERENCE_USER
 
-REFERENCE_USER = "flybo-reference"
 _RESULT_FIELDS = tuple(ResultEntry.model_fields)
 _SERIES_FIELDS = tuple(SeriesEntry.model_fields)
 

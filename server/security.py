@@ -16,6 +16,14 @@ from sqlalchemy.orm import Session
 from server.models import ApiToken, User
 
 TOKEN_PREFIX = "flybo_"
+# The owner of the published baselines' runs (`server.baselines`): no one gets its tokens, so
+# no one submits as the reference.
+REFERENCE_USER = "flybo-reference"
+RESERVED_USER_NAMES = frozenset({REFERENCE_USER})
+
+
+class ReservedUserError(ValueError):
+    """Raised for a token asked for a user name the service keeps for itself."""
 
 
 def hash_token(token: str, secret_key: str) -> str:
@@ -24,7 +32,14 @@ def hash_token(token: str, secret_key: str) -> str:
 
 def create_token(session: Session, user_name: str, secret_key: str, *,
                  admin: bool = False) -> str:
-    """A new token for `user_name` (the user is created if new; `admin` promotes it)."""
+    """A new token for `user_name` (the user is created if new; `admin` promotes it).
+
+    Raises:
+        ReservedUserError: for a name in `RESERVED_USER_NAMES`.
+    """
+    if user_name.strip().lower() in RESERVED_USER_NAMES:
+        raise ReservedUserError(f"the user name {user_name!r} is reserved for the service's "
+                                "published baselines; choose another")
     user = session.scalar(select(User).where(User.name == user_name))
     if user is None:
         user = User(name=user_name, is_admin=admin)

@@ -404,3 +404,14 @@ def test_a_run_that_sees_no_surface_keeps_its_results(tmp_path: Path,
     assert "element vertex 0" in (out / "mesh.ply").read_text()
     result = json.loads((out / "result.json").read_text())
     assert result["surface"]["recall"] in (0.0, None)
+
+
+def test_the_reference_user_name_is_reserved(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """No one gets a token of the published baselines' owner, so no one submits as it."""
+    monkeypatch.setenv("FLYBO_DATA_DIR", str(tmp_path / "data"))
+    monkeypatch.setenv("FLYBO_DATABASE_URL", f"sqlite:///{tmp_path / 'flybo.sqlite'}")
+    assert _exit_code(["tokens", "create", "--user", "Flybo-Reference"]) == 2
+    assert "reserved" in capsys.readouterr().err
+    main(["tokens", "create", "--user", "alice"])
+    assert capsys.readouterr().out.startswith("flybo_")
