@@ -38,6 +38,27 @@ def test_the_rows_are_written_from_another_process(tmp_path: Path,
     engine.dispose()
 
 
+def test_one_process_per_host_syncs_a_database(tmp_path: Path) -> None:
+    """While one process holds the host's lock for a database, another API process's sync
+    leaves the rows to it (the test above shows a sync that holds it writing them)."""
+    url = f"sqlite:///{tmp_path / 'flybo.sqlite'}"
+    engine = make_engine(url)
+    upgrade(engine)
+    sessions = make_session_factory(engine)
+
+    def count() -> int:
+        with sessions() as session:
+            return int(session.scalar(select(func.count(AreaRow.id))) or 0)
+
+    with area_sync.sync_lock(url) as mine:
+        assert mine
+        with area_sync.sync_lock(url) as also_mine:
+            assert not also_mine  # flock is per open file: a second opening is refused too
+        area_sync.sync_areas(url, sessions)
+        assert count() == 0
+    engine.dispose()
+
+
 def test_a_failure_is_logged(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     url = f"sqlite:///{tmp_path / 'missing' / 'no-tables.sqlite'}"
     engine = make_engine(url)  # no migrations: the table is missing
