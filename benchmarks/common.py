@@ -16,6 +16,8 @@ from typing import Any
 
 import httpx
 
+import flybo  # noqa: F401  before NumPy loads: it pins the OpenBLAS kernels (flybo.blas)
+
 RESULTS = Path(__file__).resolve().parent / "results"
 
 

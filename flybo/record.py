@@ -25,6 +25,7 @@ from typing import Any
 
 from areas.area import Area
 from flybo import versions
+from flybo.blas import blas_kernels
 from flybo.fingerprints import FLIGHT_LIBRARIES
 from sim.config import EpisodeConfig
 
@@ -134,7 +135,10 @@ def reproducibility_record(
         "seed": seed,
         "libraries": {"python": platform.python_version(),
                       **{lib: attempt(lib, functools.partial(importlib.metadata.version, lib))
-                         for lib in LIBRARIES}},
+                         for lib in LIBRARIES},
+                      # Which OpenBLAS kernels ran: they shape the numbers (`flybo.blas`).
+                      "openblas_kernels": attempt("openblas_kernels",
+                                                  lambda: ",".join(blas_kernels()))},
         "machine": {"cpu_model": attempt("cpu_model", _cpu_model),
                     "cores": os.cpu_count(), "speed_factor": speed_factor},
     }

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import pytest
 
+import flybo  # noqa: F401  first: it pins the OpenBLAS kernels before NumPy loads (flybo.blas)
+
 SLOW = (
     # Whole files: each test starts services, fails them or floods them.
     "tests/faults/",

@@ -77,8 +77,10 @@ def command(iso: Isolation, limits: SandboxLimits, *, numba_seed: Path, code: Pa
     args += ["--chdir", SANDBOX_WORK, "--clearenv", "--setenv", "HOME", SANDBOX_WORK,
              "--setenv", "PYTHONPATH", python_path(), "--setenv", "OMP_NUM_THREADS", "1",
              "--setenv", "NUMBA_NUM_THREADS", "1", "--setenv", "OPENBLAS_NUM_THREADS", "1",
-             "--setenv", "NUMBA_CACHE_DIR", f"{SANDBOX_WORK}/.numba-cache", "--", *python]
-    return args
+             "--setenv", "NUMBA_CACHE_DIR", f"{SANDBOX_WORK}/.numba-cache"]
+    for name, value in _passed_on().items():
+        args += ["--setenv", name, value]
+    return [*args, "--", *python]
 
 
 def child_paths(iso: Isolation, *, numba_seed: Path, code: Path | None,
@@ -96,4 +98,11 @@ def host_environment(work: Path) -> dict[str, str]:
     replaces it (`--clearenv`)."""
     return {"PATH": "/usr/bin:/bin", "HOME": str(work), "PYTHONPATH": python_path(),
             "OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
-            "NUMBA_CACHE_DIR": str(work / ".numba-cache")}
+            "NUMBA_CACHE_DIR": str(work / ".numba-cache"), **_passed_on()}
+
+
+def _passed_on() -> dict[str, str]:
+    """What the planner process takes from the worker's environment: the OpenBLAS kernels the
+    worker's entry point chose (`flybo.blas`), so that a planner computes as in process."""
+    chosen = os.environ.get("OPENBLAS_CORETYPE")
+    return {"OPENBLAS_CORETYPE": chosen} if chosen else {}
