@@ -91,8 +91,13 @@ def postgres_url() -> Iterator[str]:
 
 
 def fresh_postgres_schema(url: str) -> None:
+    """An empty schema in the session's database. What a previous test left connected (an app's
+    area-sync process still writing rows, say) is disconnected first: its inserts and the drop
+    would otherwise deadlock."""
     engine = create_engine(url, isolation_level="AUTOCOMMIT")
     with engine.connect() as conn:
+        conn.execute(text("SELECT pg_terminate_backend(pid) FROM pg_stat_activity "
+                          "WHERE datname = current_database() AND pid <> pg_backend_pid()"))
         conn.execute(text("DROP SCHEMA public CASCADE"))
         conn.execute(text("CREATE SCHEMA public"))
     engine.dispose()
