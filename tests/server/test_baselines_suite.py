@@ -37,7 +37,9 @@ RUNS, SECONDS = 3, 20.0
 PRESETS = ("exact", "default")
 
 
-@pytest.fixture(scope="module")
+# Session scope: a module fixture is set up again whenever the worker runs another file's tests
+# in between, and the suite is a minute of flights.
+@pytest.fixture(scope="session")
 def suite(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Settings, Path]]:
     """The suite flown into a service's SQLite database, and its dataset exported by the
     CLI: (the service's settings, the dataset file)."""
