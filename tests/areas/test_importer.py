@@ -1,8 +1,8 @@
 """Mesh import: real COLLADA buildings, synthetic boxes in every format, and each invalid case.
 
-The real meshes in ``tests/data/meshes`` are the Gazebo model database models ``cafe`` and
-``apartment`` by Nate Koenig, licensed under Creative Commons Attribution 3.0 Unported (see the
-README.md beside them).
+The real meshes used here, from ``tests/data/meshes``, are the Gazebo model database models
+``cafe`` and ``apartment`` by Nate Koenig, licensed under Creative Commons Attribution 3.0
+Unported (see the README.md beside them).
 """
 
 from __future__ import annotations
