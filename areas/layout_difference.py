@@ -16,6 +16,10 @@ from areas.area import Area
 
 BoolArray = npt.NDArray[np.bool_]
 
+# Two seeds of every generated area differ in at least this share of occupied voxels (the
+# smallest measured is higher: `benchmarks/heldout_difference.py`, docs/areas.md).
+MIN_LAYOUT_DIFFERENCE = 0.05
+
 
 class GridMismatchError(ValueError):
     """The two areas lie on different voxel grids, so their voxels cannot be compared."""
