@@ -293,9 +293,7 @@ def varied_rooms(cfg: OfficesConfig, seed: int) -> OfficesConfig:
     for bands in cfg.levels:
         new = []
         for band in bands:
-            rooms = band.rooms
-            if not band.corridor:
-                rooms = int(np.clip(rooms + rng.integers(-1, 3), 1, most))
+            rooms = band.rooms if band.corridor else int(rng.integers(1, most + 1))
             new.append(dataclasses.replace(band, rooms=rooms))
         levels.append(tuple(new))
     if all(a == b for a, b in zip(levels, cfg.levels, strict=True)):

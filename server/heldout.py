@@ -93,6 +93,9 @@ def build_heldout_area(name: str, family: str, seed: int) -> Any:
 
     area = generate_area(family, seed)
     area.name = name
+    # Its cache key would name the family and seed (in cache files and in the run's record);
+    # without one, the content hash names its ground-truth cache, as for an imported area.
+    area.cache_key = None
     return area
 
 

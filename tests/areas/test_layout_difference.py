@@ -32,7 +32,7 @@ def test_the_share_counts_differing_occupied_voxels() -> None:
         occupied_difference(a, np.zeros((4, 4, 5), dtype=bool))
 
 
-@pytest.mark.parametrize("family", ["maze", "powerplant", "platform-b"])
+@pytest.mark.parametrize("family", ["maze", "powerplant", "platform-b", "offices-a"])
 def test_seeds_of_a_family_differ_by_the_documented_share(family: str) -> None:
     areas = [generate_area(family, seed) for seed in SEEDS]
     for i in range(len(areas)):

@@ -3,6 +3,7 @@ rotation from the CLI, job groups that add the held-out areas, and the gap on th
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Iterator
 from pathlib import Path
@@ -147,3 +148,34 @@ def test_rotating_from_the_cli(settings: Settings, sessions: sessionmaker[Sessio
     assert "current held-out generation: 2" in listed and "family maze" in listed
     with sessions() as s:
         assert current_generation(s) == 2
+
+
+def test_a_worker_flies_the_heldout_area(sessions: sessionmaker[Session],
+                                         settings: Settings) -> None:
+    from server.catalog import sync_builtin_planners
+    from server.jobs import create_job
+    from server.models import Run, RunResult
+    from server.schemas import JobCreate
+    from worker.runner import execute_run
+
+    with session_scope(sessions) as s:
+        sync_builtin_planners(s)
+        user = User(name="carol")
+        s.add(user)
+        s.flush()
+        (area,) = ensure_heldout_areas(s, settings.heldout_key, current_version(), ["maze"])
+        name, content_hash = area.name, area.content_hash
+        created = create_job(s, settings, user, JobCreate(planner="classic", areas=[name],
+                                                          runs=1, seconds=30.0))
+    ((run_id, _),) = created.runs
+    assert execute_run(run_id, settings) == "succeeded"
+    with sessions() as s:
+        run, result = s.get(Run, run_id), s.get(RunResult, run_id)
+        assert run is not None and result is not None and result.record is not None
+        # The scene flown is the held-out layout (the row's hash), under its opaque name; the
+        # record and the log name neither its family nor its seed.
+        assert result.record["area"] == {"name": name, "generator": None,
+                                         "sha256": content_hash}
+        seed = str(run.area.stats["layout_seed"])
+        assert seed not in json.dumps(result.record) and seed not in run.log_tail
+        assert 0 < result.coverage <= 1
