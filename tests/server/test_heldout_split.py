@@ -23,7 +23,7 @@ from server.heldout import (
     heldout_seed,
     rotate,
 )
-from server.models import AreaRow, User
+from server.models import AreaRow, PlannerRow, User
 from server.settings import Settings
 from tests.server.conftest import Tokens
 from tests.web.stored import add_area, add_job, add_planner, add_run, current_version
@@ -179,3 +179,17 @@ def test_a_worker_flies_the_heldout_area(sessions: sessionmaker[Session],
         seed = str(run.area.stats["layout_seed"])
         assert seed not in json.dumps(result.record) and seed not in run.log_tail
         assert 0 < result.coverage <= 1
+
+
+def test_baseline_datasets_leave_the_heldout_areas_out(sessions: sessionmaker[Session],
+                                                       settings: Settings,
+                                                       tokens: Tokens) -> None:
+    from server.baselines import export_dataset
+
+    public, heldout = _results(sessions, settings)
+    with sessions() as s:
+        s.query(PlannerRow).filter_by(name="probe-planner").one().builtin = True
+        s.commit()
+        dataset = export_dataset(s, current_version())
+    assert {r.area for r in dataset.runs} == {public}
+    assert heldout not in dataset.model_dump_json()
