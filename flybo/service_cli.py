@@ -106,6 +106,10 @@ def _add_client_commands(sub: Any) -> None:
     results.add_argument("--benchmark-version", default=None,
                          help="the benchmark version whose results to rank (default: the "
                               "service's current one)")
+    results.add_argument("--split", choices=("public", "heldout"), default="public",
+                         help="the public areas' board (default) or the held-out areas'")
+    results.add_argument("--heldout-generation", type=int, default=None,
+                         help="with --split heldout: the generation (default: the current one)")
     _add_suite_commands(sub, client)
 
 

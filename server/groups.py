@@ -105,7 +105,10 @@ class GroupCreated:
 
 
 def request_hash(body: GroupCreate) -> str:
-    canonical = json.dumps(body.model_dump(mode="json"), sort_keys=True)
+    fields = body.model_dump(mode="json")
+    if not fields["heldout"]:  # as before the option existed: stored keys keep their hashes
+        del fields["heldout"]
+    canonical = json.dumps(fields, sort_keys=True)
     return hashlib.sha256(canonical.encode()).hexdigest()
 
 

@@ -193,3 +193,11 @@ def test_baseline_datasets_leave_the_heldout_areas_out(sessions: sessionmaker[Se
         dataset = export_dataset(s, current_version())
     assert {r.area for r in dataset.runs} == {public}
     assert heldout not in dataset.model_dump_json()
+
+
+def test_the_results_command_asks_for_a_generation_with_the_heldout_split_only(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as stopped:
+        main(["results", "--heldout-generation", "2", "--server", "http://127.0.0.1:9"])
+    assert stopped.value.code != 0
+    assert "--heldout-generation goes with --split heldout" in capsys.readouterr().err
