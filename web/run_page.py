@@ -213,6 +213,7 @@ def run_page(run_id: str, session: SessionDep) -> HTMLResponse:
         f"<h2>Metrics</h2>{_metrics(run.result) if run.result else '<p>Not finished.</p>'}"
         f"<h2>Reproducibility</h2>"
         f"{_record(run.result) if run.result else '<p>Not finished.</p>'}"
-        f"<h2>Downloads</h2>{_downloads(run)}"
+        f"<h2>Downloads</h2>"
+        f"{'<p>Held-out runs publish no files.</p>' if heldout else _downloads(run)}"
         f"<h2>Log</h2>{_log_form(run.id)}")
     return page(f"Run {run.id}", body, scripts=("run.js",), charts=True, current="/jobs")

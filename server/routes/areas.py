@@ -12,6 +12,7 @@ from sqlalchemy.exc import IntegrityError
 
 from server.catalog import CatalogError, ensure_area, upsert_area
 from server.deps import OptionalUserDep, SessionDep, SettingsDep, UserDep
+from server.heldout import NAME_PREFIX
 from server.mesh_guard import MeshGuardError, prescan
 from server.models import PUBLIC_SPLIT, AreaRow
 from server.schemas import AreaOut
@@ -21,7 +22,6 @@ from server.storage import ArtifactStoreError, settings_store
 router = APIRouter(prefix="/areas", tags=["areas"])
 
 AREA_FILE_KEY = "areas/{name}.npz"
-HELDOUT_PREFIX = "heldout-"  # the held-out areas' names (`server.heldout.NAME_PREFIX`)
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf", ".dae")
 
 
@@ -87,8 +87,8 @@ def upload_area(
     if suffix not in MESH_SUFFIXES:
         raise HTTPException(422, f"unsupported mesh file type {suffix or '(none)'!r}; use one "
                                  f"of {', '.join(MESH_SUFFIXES)}")
-    if name.startswith(HELDOUT_PREFIX):
-        raise HTTPException(422, f"names starting with {HELDOUT_PREFIX!r} are reserved")
+    if name.startswith(NAME_PREFIX):  # the held-out areas' names
+        raise HTTPException(422, f"names starting with {NAME_PREFIX!r} are reserved")
     if name in area_names() or session.scalar(select(AreaRow.id).where(AreaRow.name == name)):
         raise HTTPException(409, f"an area named {name!r} already exists")
     with tempfile.TemporaryDirectory(prefix="flybo-upload-") as tmp:

@@ -201,3 +201,11 @@ def test_the_results_command_asks_for_a_generation_with_the_heldout_split_only(
         main(["results", "--heldout-generation", "2", "--server", "http://127.0.0.1:9"])
     assert stopped.value.code != 0
     assert "--heldout-generation goes with --split heldout" in capsys.readouterr().err
+
+
+def test_uploads_may_not_take_a_heldout_name(client: TestClient, tokens: Tokens) -> None:
+    mesh = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
+    answer = client.post("/api/v1/areas", headers=tokens.auth("alice"),
+                         data={"name": f"{NAME_PREFIX}0123abcd"},
+                         files={"file": ("mesh.obj", mesh, "text/plain")})
+    assert answer.status_code == 422 and "reserved" in answer.json()["detail"]

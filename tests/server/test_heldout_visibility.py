@@ -161,3 +161,6 @@ def test_an_admin_sees_the_scene_and_everyone_its_metrics(
     public = client.get(f"/api/v1/runs/{world.public_run_id}").json()
     assert public["split"] == "public" and public["artifacts"]
     assert client.get(f"/runs/{world.run_id}/replay", follow_redirects=False).status_code == 404
+    page = client.get(f"/runs/{world.run_id}").text
+    assert "A held-out run (generation 1)" in page and "Held-out runs publish no files" in page
+    assert "Open 3D replay" not in page
