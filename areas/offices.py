@@ -14,6 +14,7 @@ walls that carry doors and out of the stairwell.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from dataclasses import dataclass
 
@@ -278,9 +279,39 @@ def _storey(p: Parts, cfg: OfficesConfig, lvl: int, storey: float, holes: list[R
         _stair_flight(p, cfg.stairwell, floor, (lvl + 1) * storey + SLAB / 2)
 
 
+MIN_ROOM_WIDTH = 3.5  # along x, when a seed other than 0 re-splits the bands
+
+
+def varied_rooms(cfg: OfficesConfig, seed: int) -> OfficesConfig:
+    """``cfg`` with its bands split into other numbers of rooms, chosen by ``seed`` (so its inner
+    walls and doors move, not only its furniture); seed 0 keeps ``cfg``, the registered scene."""
+    if seed == 0:
+        return cfg
+    rng = np.random.default_rng([seed, 1])  # apart from the furniture's draws
+    most = max(1, int(cfg.size[0] // MIN_ROOM_WIDTH))
+    levels = []
+    for bands in cfg.levels:
+        new = []
+        for band in bands:
+            rooms = band.rooms if band.corridor else int(rng.integers(1, most + 1))
+            new.append(dataclasses.replace(band, rooms=rooms))
+        levels.append(tuple(new))
+    if all(a == b for a, b in zip(levels, cfg.levels, strict=True)):
+        # Every band kept its rooms: re-split the first room band of the ground storey.
+        b = next(i for i, band in enumerate(levels[0]) if not band.corridor)
+        first = levels[0][b]
+        rooms = first.rooms + 1 if first.rooms < most else first.rooms - 1
+        if rooms >= 1 and rooms != first.rooms:
+            levels[0] = (*levels[0][:b], dataclasses.replace(first, rooms=rooms),
+                         *levels[0][b + 1:])
+    return dataclasses.replace(cfg, levels=tuple(levels))
+
+
 def build_offices(cfg: OfficesConfig, seed: int = 0) -> Area:
-    """An office building per ``cfg``; the same seed gives identical arrays."""
+    """An office building per ``cfg``; the same seed gives identical arrays. Seeds other than 0
+    also split the bands into other numbers of rooms (`varied_rooms`)."""
     rng = np.random.default_rng(seed)
+    cfg = varied_rooms(cfg, seed)
     n_levels = len(cfg.levels)
     storey = cfg.size[2] / n_levels
     p = Parts()

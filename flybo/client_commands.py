@@ -106,8 +106,18 @@ def run_results(args: argparse.Namespace) -> None:
     params = {"preset": args.preset, **({"area": args.area} if args.area else {}),
               **({"benchmark_version": args.benchmark_version} if args.benchmark_version
                  else {})}
+    split = getattr(args, "split", "public")
+    generation = getattr(args, "heldout_generation", None)
+    if generation is not None and split != "heldout":
+        raise CliError("--heldout-generation goes with --split heldout")
+    if split != "public":
+        params["split"] = split
+        if generation is not None:
+            params["heldout_generation"] = generation
     board = request(args, "GET", "/leaderboard", params=params)
-    print(f"preset {board['preset']}, benchmark version {board.get('benchmark_version')}; "
+    held = (f", held-out generation {board.get('heldout_generation')}"
+            if board.get("split") == "heldout" else "")
+    print(f"preset {board['preset']}, benchmark version {board.get('benchmark_version')}{held}; "
           f"areas: {', '.join(board['areas']) or 'none yet'}")
     print(f"{'rank':>4}  {'planner':<18} {'areas':>5} {'coverage':>9} {'cov. rank':>9} "
           f"{'F-score':>8}")

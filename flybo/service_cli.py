@@ -18,11 +18,12 @@ from typing import Any
 from flybo.baselines_commands import add_baselines_command, run_baselines
 from flybo.client_commands import run_jobs, run_results, run_submit, run_submit_planner
 from flybo.errors import CliError
+from flybo.heldout_commands import add_heldout_command, run_heldout
 from flybo.local_commands import run_serve, run_tokens, run_viewer, run_worker
 from flybo.suite_commands import run_benchmark, run_report
 
 COMMANDS = ("serve", "worker", "viewer", "tokens", "submit", "submit-planner", "jobs",
-            "results", "benchmark", "report", "baselines")
+            "results", "benchmark", "report", "baselines", "heldout")
 DEFAULT_SERVER = "http://127.0.0.1:8000"
 
 
@@ -30,6 +31,7 @@ def add_service_commands(sub: Any) -> None:
     _add_local_commands(sub)
     _add_client_commands(sub)
     add_baselines_command(sub)
+    add_heldout_command(sub)
 
 
 def _add_local_commands(sub: Any) -> None:
@@ -104,6 +106,10 @@ def _add_client_commands(sub: Any) -> None:
     results.add_argument("--benchmark-version", default=None,
                          help="the benchmark version whose results to rank (default: the "
                               "service's current one)")
+    results.add_argument("--split", choices=("public", "heldout"), default="public",
+                         help="the public areas' board (default) or the held-out areas'")
+    results.add_argument("--heldout-generation", type=int, default=None,
+                         help="with --split heldout: the generation (default: the current one)")
     _add_suite_commands(sub, client)
 
 
@@ -132,6 +138,8 @@ def _add_suite_commands(sub: Any, client: Any) -> None:
                         help="simulated seconds of every run (default: each area's plateau)")
     length.add_argument("--time-scale", type=float, default=None,
                         help="run each area for this fraction (0-1] of its plateau time")
+    bench.add_argument("--heldout", action="store_true",
+                       help="also run the areas' held-out counterparts (the held-out board)")
     bench.add_argument("--follow", type=int, default=None, metavar="GROUP",
                        help="do not submit: wait for the group GROUP submitted earlier")
     bench.add_argument("--no-wait", action="store_true", help="submit and return")
@@ -156,7 +164,7 @@ def run_service_command(args: argparse.Namespace) -> None:
     {"serve": run_serve, "worker": run_worker, "tokens": run_tokens, "submit": run_submit,
      "jobs": run_jobs, "results": run_results, "submit-planner": run_submit_planner,
      "viewer": run_viewer, "benchmark": run_benchmark, "report": run_report,
-     "baselines": run_baselines}[args.command](args)
+     "baselines": run_baselines, "heldout": run_heldout}[args.command](args)
 
 
 def check_planner(path: Path) -> None:

@@ -33,6 +33,8 @@ def run_benchmark(args: argparse.Namespace) -> None:
     for key in ("name", "seconds", "time_scale"):
         if getattr(args, key) is not None:
             body[key] = getattr(args, key)
+    if getattr(args, "heldout", False):
+        body["heldout"] = True
     # One key per invocation: a retry after a lost answer returns the same group.
     key = uuid.uuid4().hex
     group = request(args, "POST", "/groups", auth=True, json=body,

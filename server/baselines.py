@@ -35,6 +35,7 @@ from server.baseline_format import (
     SuiteEntry,
 )
 from server.models import (
+    PUBLIC_SPLIT,
     AreaRow,
     Job,
     MetricSeries,
@@ -52,8 +53,8 @@ _SERIES_FIELDS = tuple(SeriesEntry.model_fields)
 
 def export_dataset(session: Session, benchmark_version: str,
                    presets: Sequence[str] | None = None) -> Dataset:
-    """The succeeded runs of built-in planners made by `benchmark_version` (in `presets` only,
-    when given), ordered by preset, planner, area and seed."""
+    """The succeeded runs of built-in planners on public areas made by `benchmark_version` (in
+    `presets` only, when given), ordered by preset, planner, area and seed."""
     query = (select(Run, RunResult, MetricSeries, PlannerRow, AreaRow)
              .join(RunResult, RunResult.run_id == Run.id)
              .outerjoin(MetricSeries, MetricSeries.run_id == Run.id)
@@ -61,7 +62,9 @@ def export_dataset(session: Session, benchmark_version: str,
              .join(PlannerRow, Job.planner_id == PlannerRow.id)
              .join(AreaRow, Run.area_id == AreaRow.id)
              .where(Run.status == RunState.SUCCEEDED.value, PlannerRow.builtin.is_(True),
-                    RunResult.benchmark_version == benchmark_version))
+                    RunResult.benchmark_version == benchmark_version,
+                    # A dataset is published: held-out areas' rows hold their secret seeds.
+                    AreaRow.split == PUBLIC_SPLIT))
     if presets:
         query = query.where(Run.preset.in_(list(presets)))
     planners: dict[str, PlannerEntry] = {}

@@ -19,8 +19,9 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from server.catalog import CatalogError, ensure_area, find_planner
+from server.heldout import ensure_heldout_areas
 from server.jobs import JobError, cancel_job, check_quotas, create_job, job_status
-from server.models import AreaRow, Job, JobGroup, PlannerRow, RunState, User
+from server.models import LEGACY_VERSION, AreaRow, Job, JobGroup, PlannerRow, RunState, User
 from server.schemas import JobCreate
 from server.settings import Settings
 
@@ -45,6 +46,9 @@ class GroupCreate(BaseModel):
     time_scale: float | None = Field(default=None, gt=0, le=1, allow_inf_nan=False,
                                      description="run each area for this fraction of its "
                                                  "plateau time (not with `seconds`)")
+    heldout: bool = Field(default=False, description="also run the held-out counterparts of "
+                          "the areas (the current generation's), which rank on the held-out "
+                          "board")
 
     @field_validator("planners", "areas")
     @classmethod
@@ -101,7 +105,10 @@ class GroupCreated:
 
 
 def request_hash(body: GroupCreate) -> str:
-    canonical = json.dumps(body.model_dump(mode="json"), sort_keys=True)
+    fields = body.model_dump(mode="json")
+    if not fields["heldout"]:  # as before the option existed: stored keys keep their hashes
+        del fields["heldout"]
+    canonical = json.dumps(fields, sort_keys=True)
     return hashlib.sha256(canonical.encode()).hexdigest()
 
 
@@ -142,8 +149,21 @@ def _areas(session: Session, names: list[str]) -> list[AreaRow]:
     return rows
 
 
+def _heldout_areas(session: Session, settings: Settings, names: list[str],
+                   benchmark_version: str) -> list[AreaRow]:
+    """The current generation's held-out areas of the built-in areas `names` (['all']: of
+    every one the service holds out)."""
+    wanted = set(settings.heldout_areas) if names == [ALL] else set(names)
+    families = [name for name in settings.heldout_areas if name in wanted]
+    if not families:
+        raise JobError(422, "none of these areas has a held-out counterpart; held out: "
+                            f"{', '.join(settings.heldout_areas) or 'none'}")
+    return ensure_heldout_areas(session, settings.heldout_key, benchmark_version, families)
+
+
 def create_group(session: Session, settings: Settings, user: User, body: GroupCreate, *,
-                 idempotency_key: str | None = None) -> GroupCreated:
+                 idempotency_key: str | None = None,
+                 benchmark_version: str = LEGACY_VERSION) -> GroupCreated:
     """The group and its jobs, flushed in the caller's transaction; the caller commits, then
     enqueues `runs`. Any refusal raises `JobError` before anything is committed."""
     digest = request_hash(body)
@@ -158,6 +178,8 @@ def create_group(session: Session, settings: Settings, user: User, body: GroupCr
         raise JobError(422, "give either seconds or time_scale, not both")
     planners = _planner_names(session, body.planners)
     areas = _areas(session, body.areas)
+    if body.heldout:
+        areas += _heldout_areas(session, settings, body.areas, benchmark_version)
     # The whole group against the concurrent-runs quota first, so that a group is refused
     # whole rather than after some of its jobs; create_job checks each job again.
     check_quotas(session, settings, user, len(planners) * len(areas) * body.runs)

@@ -16,8 +16,10 @@ from sqlalchemy import Connection, and_, bindparam, exists, func, select
 from sqlalchemy.orm import Session
 
 from server.catalog import CatalogError, ensure_area, find_planner, preset_names
+from server.heldout import current_generation
 from server.models import (
     ACTIVE_STATES,
+    HELDOUT_SPLIT,
     AreaRow,
     FailureKind,
     Job,
@@ -77,6 +79,7 @@ def create_job(session: Session, settings: Settings, user: User, body: JobCreate
             areas.append(ensure_area(session, name))
         except CatalogError as exc:
             raise JobError(422, str(exc)) from None
+    _refuse_retired(session, areas)
     n_runs = body.runs * len(areas)
     if n_runs > settings.max_runs_per_job:
         raise JobError(422, f"a job may have at most {settings.max_runs_per_job} runs "
@@ -97,6 +100,20 @@ def create_job(session: Session, settings: Settings, user: User, body: JobCreate
     session.add_all(runs)
     session.flush()
     return Created(job, [(r.id, r.seconds) for r in runs], replayed=False)
+
+
+def _refuse_retired(session: Session, areas: list[AreaRow]) -> None:
+    """409 for a held-out area of a generation rotated away: its results stay, but no new run
+    joins them."""
+    heldout = [a for a in areas if a.split == HELDOUT_SPLIT]
+    if not heldout:
+        return
+    current = current_generation(session)
+    for area in heldout:
+        if area.heldout_generation != current:
+            raise JobError(409, f"area {area.name!r} belongs to held-out generation "
+                                f"{area.heldout_generation}, which was rotated away (the current "
+                                f"one is {current})")
 
 
 def check_quotas(session: Session, settings: Settings, user: User, new_runs: int) -> None:

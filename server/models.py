@@ -112,6 +112,10 @@ class ApiToken(Base):
     user: Mapped[User] = relationship(back_populates="tokens")
 
 
+PUBLIC_SPLIT = "public"
+HELDOUT_SPLIT = "heldout"
+
+
 class AreaRow(Base):
     __tablename__ = "areas"
 
@@ -123,6 +127,26 @@ class AreaRow(Base):
     plateau_s: Mapped[float] = mapped_column(Float)
     voxel_size: Mapped[float] = mapped_column(Float)
     stats: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    created_at: Mapped[datetime] = mapped_column(_TS, default=utcnow)
+    # "public", or "heldout": generated from a secret seed (`server.heldout`), its scene shown
+    # to admins only, ranked on a board of its own and only with areas of its generation.
+    split: Mapped[str] = mapped_column(String(16), default=PUBLIC_SPLIT,
+                                       server_default=text("'public'"), index=True)
+    heldout_generation: Mapped[int | None] = mapped_column(Integer, nullable=True)
+
+    @property
+    def heldout(self) -> bool:
+        return self.split == HELDOUT_SPLIT
+
+
+class HeldoutGeneration(Base):
+    """A generation of the held-out seeds: rotating them (`flybo heldout rotate`) starts a new
+    one; results on areas of an older one stay, filed under theirs."""
+
+    __tablename__ = "heldout_generations"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)  # the generation number
+    note: Mapped[str] = mapped_column(Text, default="")
     created_at: Mapped[datetime] = mapped_column(_TS, default=utcnow)
 
 

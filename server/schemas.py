@@ -31,6 +31,9 @@ class AreaOut(BaseModel):
     plateau_s: float
     voxel_size: float
     stats: dict[str, Any]
+    split: str = Field(default="public", description="'public', or 'heldout' (seen by admins "
+                       "only)")
+    heldout_generation: int | None = None
 
 
 class PlannerOut(BaseModel):
@@ -151,6 +154,11 @@ class RunOut(BaseModel):
     failure_kind: str | None
     result: ResultOut | None
     artifacts: list[ArtifactOut]
+    split: str = Field(default="public", description="the area's split: 'public' or 'heldout' "
+                       "(then its files, log and record are shown to admins only)")
+    heldout_generation: int | None = Field(default=None, description="the held-out area's "
+                                           "generation; results of different ones are never "
+                                           "ranked together")
 
 
 class SeriesOut(BaseModel):
@@ -252,6 +260,10 @@ class LeaderboardPlanner(BaseModel):
 
 class Leaderboard(BaseModel):
     preset: str
+    split: str = Field(default="public", description="'public': the public areas; 'heldout': "
+                       "the held-out areas of one generation")
+    heldout_generation: int | None = Field(default=None, description="the generation ranked, "
+                                           "on the held-out board")
     benchmark_version: str = Field(description="the one benchmark version whose results "
                                    "are ranked")
     metrics: list[MetricOut] = Field(default_factory=list,

@@ -17,6 +17,8 @@ Scale-out sets `FLYBO_DATABASE_URL`, `FLYBO_BROKER_URL` and `FLYBO_ARTIFACT_URL`
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 from functools import cached_property
 from pathlib import Path
 from typing import Literal
@@ -26,6 +28,12 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 
 # Known only to development setups; production refuses to start with it.
 DEVELOPMENT_SECRET = "development-only-secret-do-not-use-in-production"
+
+
+# Every built-in area has a held-out counterpart by default.
+HELDOUT_DEFAULT_AREAS = ("facility-a", "facility-b", "facility-c", "maze", "offices-a",
+                         "offices-b", "offices-c", "platform-a", "platform-b", "powerplant",
+                         "warehouse")
 
 
 # A run is told to stop (and fails cleanly) this long before its hard limit kills its process;
@@ -76,6 +84,15 @@ class Settings(BaseSettings):
         default=None, ge=1, le=64, description="API processes of `flybo serve`; default the "
         "usable cores in production (with Redis), else 1")
     secret_key: str = Field(default=DEVELOPMENT_SECRET, description="keys the token hashes")
+    # The held-out split (`server.heldout`): its areas' layout seeds and names are HMACs of
+    # this secret, the benchmark version, the generation and the area; keep it fixed for a
+    # benchmark version (changing it makes other areas) and rotate with `flybo heldout rotate`.
+    heldout_secret: str | None = Field(
+        default=None, description="keys the held-out areas' seeds and names; default: a key "
+        "derived from secret_key")
+    heldout_areas: list[str] = Field(
+        default_factory=lambda: list(HELDOUT_DEFAULT_AREAS),
+        description="the built-in areas whose generator makes a held-out area each")
 
     # Uploads.
     max_area_upload_mib: float = Field(default=200.0, gt=0)
@@ -131,10 +148,22 @@ class Settings(BaseSettings):
                 "FLYBO_SECRET_KEY must be set to a random string of at least 32 characters "
                 "when FLYBO_ENVIRONMENT=production"
             )
+        if self.heldout_secret is not None and len(self.heldout_secret) < 32 \
+                and self.environment == "production":
+            raise ValueError("FLYBO_HELDOUT_SECRET must be at least 32 characters long")
         refusal = insecure_sandbox_refusal(self.environment, self.sandbox_allow_insecure)
         if refusal is not None:
             raise ValueError(refusal)
         return self
+
+    @property
+    def heldout_key(self) -> bytes:
+        """The key of the held-out seeds: `heldout_secret`, else derived from `secret_key`
+        (which production requires), so a deployment has held-out areas of its own."""
+        if self.heldout_secret is not None:
+            return self.heldout_secret.encode()
+        return hmac.new(self.secret_key.encode(), b"flybo held-out split",
+                        hashlib.sha256).digest()
 
     @cached_property
     def resolved_data_dir(self) -> Path:

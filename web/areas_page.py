@@ -17,7 +17,7 @@ from fastapi.responses import FileResponse, HTMLResponse, Response
 from sqlalchemy import select
 
 from server.deps import SessionDep, SettingsDep
-from server.models import AreaRow
+from server.models import PUBLIC_SPLIT, AreaRow
 from server.routes.areas import area_out
 from server.schemas import AreaOut
 from web.html import DASH, esc, not_found, page, table, td
@@ -99,7 +99,9 @@ def _num_td(value: Any) -> str:
 
 @router.get("/areas", response_class=HTMLResponse)
 def areas_page(session: SessionDep) -> HTMLResponse:
-    rows = [area_out(r) for r in session.scalars(select(AreaRow).order_by(AreaRow.name))]
+    # The website is anonymous: the held-out areas are never listed (`server.split_access`).
+    rows = [area_out(r) for r in session.scalars(
+        select(AreaRow).where(AreaRow.split == PUBLIC_SPLIT).order_by(AreaRow.name))]
     cards = "".join(_card(a) for a in rows) or "<p>No areas are registered yet.</p>"
     body = ("<h1>Areas</h1><p class='lead'>The simulated scenes planners are tested in, with "
             f"their statistics (the paper's Table 1). {len(rows)} areas.</p>"
@@ -138,7 +140,8 @@ def _thumbnail(name: str, view: Literal["top", "perspective"], areas_dir: Path) 
 @router.get("/areas/{name}/thumbnail.png", response_model=None)
 def thumbnail(name: str, session: SessionDep, settings: SettingsDep,
               view: Literal["top", "perspective"] = "top") -> Response:
-    if session.scalar(select(AreaRow.id).where(AreaRow.name == name)) is None:
+    if session.scalar(select(AreaRow.id).where(AreaRow.name == name,
+                                               AreaRow.split == PUBLIC_SPLIT)) is None:
         return not_found(f"No area named {name}.")
     path = _thumbnail(name, view, settings.areas_dir)
     if path is None or not path.exists():

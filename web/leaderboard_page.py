@@ -6,7 +6,9 @@ by `leaderboard.js` from `/api/v1/curves` (Figures 4 and 5) and from the `data-*
 overall table (Figure 6), so they cost no second leaderboard query. Results of different
 benchmark versions are never ranked together: the page shows the current version's unless a
 link of its version selector (`?benchmark_version=`) asks for another. Besides the paper's
-columns, the tables show each leaderboard metric of the measures (`Leaderboard.metrics`).
+columns, the tables show each leaderboard metric of the measures (`Leaderboard.metrics`). The
+public areas rank on the main tables; the held-out areas on a board of their own, with each
+planner's gap between the two (`web.heldout_board`).
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from server.schemas import (
     LeaderboardPlanner,
     MetricOut,
 )
+from web.heldout_board import heldout_section
 from web.html import (
     DASH,
     ci_span,
@@ -293,6 +296,7 @@ def leaderboard_page(
         f"{_coverage_table(board)}"
         f"<p>Pareto set (coverage rank against F-score rank): <strong id='pareto-set'>"
         f"{esc(pareto)}</strong></p>"
+        f"{heldout_section(session, preset, version, board)}"
         f"{_surface_table(board)}{_area_table(board, chosen)}"
         f"{_figures(preset, chosen, version)}"
         f"<h2>Jobs</h2>{recent_jobs_table(session, RECENT_JOBS)}"

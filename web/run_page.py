@@ -13,8 +13,8 @@ from fastapi import APIRouter, HTTPException
 from fastapi.responses import HTMLResponse
 
 from server.deps import SessionDep
-from server.models import RunState
-from server.routes.runs import get_run
+from server.models import HELDOUT_SPLIT, RunState
+from server.routes.runs import read_run
 from server.schemas import ResultOut, RunOut
 from web.html import DASH, esc, not_found, num, page, planner_link, status_badge
 from web.jobs_page import progress_bar
@@ -141,7 +141,8 @@ def _facts(run: RunOut) -> str:
     rows = [
         ("Job", f"<a href='/jobs/{run.job_id}'>job {run.job_id}</a>"),
         ("Planner", planner_link(run.planner, False)),
-        ("Area", f"<a href='/areas#area-{esc(run.area)}'>{esc(run.area)}</a>"),
+        ("Area", esc(run.area) if run.split == HELDOUT_SPLIT else
+         f"<a href='/areas#area-{esc(run.area)}'>{esc(run.area)}</a>"),
         ("Seed", str(run.seed)), ("Preset", esc(run.preset)),
         ("Simulated seconds", num(run.seconds, 0)),
         ("Status", f"<span id='run-status'>{status_badge(run.status)}</span>"),
@@ -187,7 +188,7 @@ def run_page(run_id: str, session: SessionDep) -> HTMLResponse:
     if not run_id.isdigit() or len(run_id) >= 12:
         return not_found(f"No run with id {run_id}.")
     try:
-        run = get_run(int(run_id), session)
+        run = read_run(session, int(run_id), None)  # the website is anonymous
     except HTTPException:
         return not_found(f"No run with id {run_id}.")
     final = RunState(run.status).final
@@ -199,15 +200,20 @@ def run_page(run_id: str, session: SessionDep) -> HTMLResponse:
         "<figure><div class='chart' id='recall-chart' role='img' aria-label='Surface recall "
         "over time'></div><figcaption>Surface recall over time.</figcaption></figure></div>"
         "<p class='live' id='chart-note' aria-live='polite'></p>")
+    heldout = run.split == HELDOUT_SPLIT
+    replay = (f"<p class='lead'>A held-out run (generation {run.heldout_generation}): its "
+              "metrics are public, its scene, files and log are not.</p>" if heldout else
+              f"<p><a class='button' href='/runs/{run.id}/replay'>Open 3D replay</a></p>")
     body = (
         f"<h1>Run {run.id} <small>{esc(run.planner)} on {esc(run.area)}, seed {run.seed}"
         "</small></h1>"
-        f"<p><a class='button' href='/runs/{run.id}/replay'>Open 3D replay</a></p>"
+        f"{replay}"
         f"{_facts(run)}"
         f"<h2>Curves</h2>{charts}"
         f"<h2>Metrics</h2>{_metrics(run.result) if run.result else '<p>Not finished.</p>'}"
         f"<h2>Reproducibility</h2>"
         f"{_record(run.result) if run.result else '<p>Not finished.</p>'}"
-        f"<h2>Downloads</h2>{_downloads(run)}"
+        f"<h2>Downloads</h2>"
+        f"{'<p>Held-out runs publish no files.</p>' if heldout else _downloads(run)}"
         f"<h2>Log</h2>{_log_form(run.id)}")
     return page(f"Run {run.id}", body, scripts=("run.js",), charts=True, current="/jobs")

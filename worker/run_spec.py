@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -10,7 +11,8 @@ from typing import TYPE_CHECKING, Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
-from server.models import AreaRow, Job, PlannerRow, Run
+from server.heldout import build_heldout_area, heldout_source
+from server.models import HELDOUT_SPLIT, AreaRow, Job, PlannerRow, Run
 from server.storage import ArtifactStore
 
 if TYPE_CHECKING:
@@ -29,6 +31,8 @@ class RunSpec:
     preset: str
     seed: int
     seconds: float
+    # A held-out area's (family, layout seed) (`server.heldout`); None for any other area.
+    area_source: tuple[str, int] | None = None
 
 
 def read_spec(factory: sessionmaker[Session], run_id: int) -> RunSpec:
@@ -40,7 +44,8 @@ def read_spec(factory: sessionmaker[Session], run_id: int) -> RunSpec:
         defaults = planner.config.get("defaults") if planner.builtin else None
         return RunSpec(area.name, area.stats.get("file"), planner.key, planner.builtin,
                        planner.config.get("code"), planner.code_hash or "",
-                       dict(defaults or {}), run.preset, run.seed, run.seconds)
+                       dict(defaults or {}), run.preset, run.seed, run.seconds,
+                       heldout_source(area.stats) if area.split == HELDOUT_SPLIT else None)
 
 
 def load_run_area(spec: RunSpec, store: ArtifactStore, folder: Path) -> Area:
@@ -51,6 +56,8 @@ def load_run_area(spec: RunSpec, store: ArtifactStore, folder: Path) -> Area:
     from areas.registry import load_area
     from areas.store import AreaStoreError, load_stored_area
 
+    if spec.area_source is not None:
+        return _heldout_area(spec.area, *spec.area_source)
     if spec.area_file is None:
         return load_area(spec.area)
     try:
@@ -64,3 +71,11 @@ def load_run_area(spec: RunSpec, store: ArtifactStore, folder: Path) -> Area:
     part.write_bytes(source.read_bytes())
     os.replace(part, target)
     return load_stored_area(spec.area, folder)
+
+
+@functools.lru_cache(maxsize=4)
+def _heldout_area(name: str, family: str, seed: int) -> Area:
+    """A held-out area, built once per process (as `areas.registry.load_area` keeps the
+    built-in ones)."""
+    area: Area = build_heldout_area(name, family, seed)
+    return area

@@ -11,10 +11,12 @@ from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 
 from server.catalog import CatalogError, ensure_area, upsert_area
-from server.deps import SessionDep, SettingsDep, UserDep
+from server.deps import OptionalUserDep, SessionDep, SettingsDep, UserDep
+from server.heldout import NAME_PREFIX
 from server.mesh_guard import MeshGuardError, prescan
-from server.models import AreaRow
+from server.models import PUBLIC_SPLIT, AreaRow
 from server.schemas import AreaOut
+from server.split_access import refuse_hidden, sees_heldout
 from server.storage import ArtifactStoreError, settings_store
 
 router = APIRouter(prefix="/areas", tags=["areas"])
@@ -27,18 +29,25 @@ def area_out(row: AreaRow) -> AreaOut:
     return AreaOut(name=row.name, builtin=row.builtin, title=str(row.stats.get("title", row.name)),
                    content_hash=row.content_hash, plateau_s=row.plateau_s,
                    voxel_size=row.voxel_size,
-                   stats={k: v for k, v in row.stats.items() if k != "file"})
+                   stats={k: v for k, v in row.stats.items() if k != "file"},
+                   split=row.split, heldout_generation=row.heldout_generation)
 
 
 @router.get("", response_model=list[AreaOut])
-def list_areas(session: SessionDep) -> list[AreaOut]:
-    return [area_out(r) for r in session.scalars(select(AreaRow).order_by(AreaRow.name))]
+def list_areas(session: SessionDep, user: OptionalUserDep) -> list[AreaOut]:
+    """Every area; the held-out ones for admins only (`server.split_access`)."""
+    query = select(AreaRow).order_by(AreaRow.name)
+    if not sees_heldout(user):
+        query = query.where(AreaRow.split == PUBLIC_SPLIT)
+    return [area_out(r) for r in session.scalars(query)]
 
 
 @router.get("/{name}", response_model=AreaOut, responses={404: {"description": "no such area"}})
-def get_area(name: str, session: SessionDep, request: Request) -> AreaOut:
+def get_area(name: str, session: SessionDep, request: Request,
+             user: OptionalUserDep) -> AreaOut:
     row = session.scalar(select(AreaRow).where(AreaRow.name == name))
     if row is not None:
+        refuse_hidden(row, user)
         return area_out(row)
     # First sight of a built-in area: its row is written, by a writing session.
     with request.app.state.sessions() as writer:
@@ -78,6 +87,8 @@ def upload_area(
     if suffix not in MESH_SUFFIXES:
         raise HTTPException(422, f"unsupported mesh file type {suffix or '(none)'!r}; use one "
                                  f"of {', '.join(MESH_SUFFIXES)}")
+    if name.startswith(NAME_PREFIX):  # the held-out areas' names
+        raise HTTPException(422, f"names starting with {NAME_PREFIX!r} are reserved")
     if name in area_names() or session.scalar(select(AreaRow.id).where(AreaRow.name == name)):
         raise HTTPException(409, f"an area named {name!r} already exists")
     with tempfile.TemporaryDirectory(prefix="flybo-upload-") as tmp:

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Header, HTTPException, Query, Response
+from fastapi import APIRouter, Header, HTTPException, Query, Request, Response
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, selectinload
 
+from server.benchmark_versions import current_version
 from server.deps import IdPath, SessionDep, SettingsDep, UserDep
 from server.groups import GroupCreate, GroupOut, cancel_group, create_group, group_out
 from server.models import Job, JobGroup, Run, User
@@ -42,11 +43,15 @@ def submit_group(
     settings: SettingsDep,
     user: UserDep,
     response: Response,
+    request: Request,
     idempotency_key: Annotated[str | None, Header(max_length=128)] = None,
 ) -> GroupOut:
-    """One job per planner (every area, `runs` seeds each), stored in one transaction."""
+    """One job per planner (every area, `runs` seeds each), stored in one transaction; with
+    `heldout`, the areas' held-out counterparts too."""
+    version = current_version(request.app.state, session)
     created = submit(session, settings, lambda: create_group(
-        session, settings, user, body, idempotency_key=idempotency_key),
+        session, settings, user, body, idempotency_key=idempotency_key,
+        benchmark_version=version),
         idempotency_key=idempotency_key, response=response)
     return group_out(_load(session, created.group.id))
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import gzip
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, HTTPException, Query, Request, Response
 from sqlalchemy.orm import Session, sessionmaker
@@ -24,7 +24,9 @@ from server.benchmark_versions import (
     list_versions,
 )
 from server.deps import SessionDep
-from server.leaderboard import Served, has_board, serve_leaderboard
+from server.heldout import current_generation
+from server.leaderboard import PUBLIC_SCOPE, Scope, Served, has_board, serve_leaderboard
+from server.models import HELDOUT_SPLIT, PUBLIC_SPLIT
 from server.schemas import BenchmarkVersions, ErrorBody, Leaderboard
 
 router = APIRouter(tags=["leaderboard"])
@@ -60,8 +62,14 @@ async def leaderboard(
     preset: Annotated[str, Query(max_length=32)] = "default",
     area: Annotated[str | None, Query(max_length=40)] = None,
     benchmark_version: Annotated[str | None, VERSION_QUERY] = None,
+    split: Annotated[Literal["public", "heldout"], Query(
+        description="'public': the public areas; 'heldout': the held-out areas of one "
+                    "generation, shown by their opaque names only")] = "public",
+    heldout_generation: Annotated[int | None, Query(
+        ge=1, le=2**31 - 1, description="the held-out generation ranked (with "
+        "split=heldout); default: the current one")] = None,
 ) -> Response:
-    """The results of one benchmark version, never mixed with another's."""
+    """The results of one benchmark version and one split, never mixed with another's."""
     # An async endpoint without a session dependency: a cached answer needs no worker thread
     # and no pooled connection of its own (the version check is shared, see serve_leaderboard).
     state = request.app.state
@@ -78,8 +86,9 @@ async def leaderboard(
             await asyncio.to_thread(_in_thread_session, sessions, _check, version, current)
         except UnknownBenchmarkVersionError as exc:
             raise HTTPException(404, str(exc)) from None
+    scope = await _scope(sessions, split, heldout_generation)
     served = await serve_leaderboard(state.engine, sessions, preset, area,
-                                     benchmark_version=version,
+                                     benchmark_version=version, scope=scope,
                                      epoch=getattr(state, "results_epoch", None))
     zipped = accepts_gzip(request.headers.get("accept-encoding"))
     # Each encoding is a representation of its own, with a strong ETag of its own.
@@ -91,6 +100,22 @@ async def leaderboard(
         headers["Content-Encoding"] = "gzip"
         return Response(gzipped(served), media_type="application/json", headers=headers)
     return Response(served.body, media_type="application/json", headers=headers)
+
+
+async def _scope(sessions: sessionmaker[Session], split: str,
+                 generation: int | None) -> Scope:
+    """The board's scope; 404 for a held-out generation that was never started."""
+    if split == PUBLIC_SPLIT:
+        if generation is not None:
+            raise HTTPException(422, "heldout_generation goes with split=heldout only")
+        return PUBLIC_SCOPE
+    current = int(await asyncio.to_thread(_in_thread_session, sessions, current_generation))
+    if generation is None:
+        return HELDOUT_SPLIT, current
+    if generation > current:
+        raise HTTPException(404, f"unknown held-out generation {generation}; the current one "
+                                 f"is {current}")
+    return HELDOUT_SPLIT, generation
 
 
 def accepts_gzip(accept_encoding: str | None) -> bool:

@@ -225,7 +225,8 @@ def test_leaderboard_is_empty_without_results(client: TestClient) -> None:
     assert board.pop("benchmark_version") == current_version()
     assert "time_to_90_coverage_s" in {m["key"] for m in board.pop("metrics")}
     assert board.pop("statistics")["resamples"] == 2000  # how intervals would be made
-    assert board == {"preset": "default", "areas": [], "overall": [], "entries": []}
+    assert board == {"preset": "default", "split": "public", "heldout_generation": None,
+                     "areas": [], "overall": [], "entries": []}
     versions = client.get("/api/v1/benchmark-versions").json()
     assert versions == {"current": current_version(), "preset": None, "versions": []}
 

@@ -83,3 +83,25 @@ def test_results_stored_before_versions_read_legacy(database_url: str) -> None:
                       if c["name"] == "benchmark_version")
         assert column["default"] is None and not column["nullable"]
     engine.dispose()
+
+
+def test_areas_stored_before_the_split_are_public(database_url: str) -> None:
+    """A database at 0004 keeps its areas through 0005 as public ones, without a held-out
+    generation; the generations table starts empty (generation 1 is current)."""
+    from server.heldout import current_generation
+    from server.models import AreaRow, HeldoutGeneration
+
+    engine = make_engine(database_url)
+    command.upgrade(alembic_config(database_url), "0004")
+    with engine.begin() as conn:
+        conn.execute(text(
+            "INSERT INTO areas (id, name, builtin, content_hash, plateau_s, voxel_size, stats, "
+            "created_at) VALUES (1, 'maze', true, 'h', 700, 0.1, '{}', :now)"),
+            {"now": datetime.now(UTC)})
+    upgrade(engine)
+    with Session(engine) as session:
+        area = session.scalars(select(AreaRow)).one()
+        assert (area.split, area.heldout_generation, area.heldout) == ("public", None, False)
+        assert session.scalar(select(func.count()).select_from(HeldoutGeneration)) == 0
+        assert current_generation(session) == 1
+    engine.dispose()

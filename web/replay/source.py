@@ -18,7 +18,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
 from areas import Area, load_area
-from server.models import AreaRow, Artifact, MetricSeries, Run
+from server.models import PUBLIC_SPLIT, AreaRow, Artifact, MetricSeries, Run
 from server.storage import ArtifactStore, ArtifactStoreError
 from sim.camera import CameraConfig
 from sim.recording import Recording, RecordingError
@@ -168,6 +168,8 @@ def find_stored_run(session: Session, run_id: int) -> StoredRun:
     run = session.get(Run, run_id)
     if run is None:
         raise RunLookupError(f"run {run_id} does not exist")
+    if run.area.split != PUBLIC_SPLIT:  # the viewer is public: held-out scenes stay unseen
+        raise RunLookupError(f"run {run_id} flew a held-out area, whose scene is not shown")
     artifacts = {a.kind: a.location for a in session.scalars(
         select(Artifact).where(Artifact.run_id == run_id))}
     if "recording" not in artifacts:
@@ -202,5 +204,6 @@ def recent_runs(sessions: sessionmaker[Session], limit: int = 50) -> list[tuple[
             select(Run.id, Run.status, Run.seed, AreaRow.name)
             .join(AreaRow, AreaRow.id == Run.area_id)
             .join(Artifact, (Artifact.run_id == Run.id) & (Artifact.kind == "recording"))
+            .where(AreaRow.split == PUBLIC_SPLIT)
             .order_by(Run.id.desc()).limit(limit)).all()
         return [(int(r[0]), f"run {r[0]}: {r[3]}, seed {r[2]} ({r[1]})") for r in rows]
