@@ -13,12 +13,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from server.board_statistics import INFO as STATISTICS
 from server.board_statistics import Cell, annotate, describe
-from server.models import PUBLIC_SPLIT, AreaRow, Job, PlannerRow, Run, RunResult, RunState
+from server.models import PUBLIC_SPLIT, AreaRow, PlannerRow, RunResult
+from server.result_queries import succeeded_results
 from server.schemas import Leaderboard, LeaderboardEntry, LeaderboardPlanner, MetricOut
 
 # Which areas a board ranks: (split, held-out generation); the public board has no generation.
@@ -92,15 +92,9 @@ def _mean(values: Sequence[float | None]) -> float | None:
 def compute_leaderboard(session: Session, preset: str, area: str | None = None, *,
                         benchmark_version: str, scope: Scope = PUBLIC_SCOPE) -> Leaderboard:
     split, generation = scope
-    query = (
-        select(PlannerRow.name, PlannerRow.version, PlannerRow.builtin, AreaRow.name, RunResult)
-        .join(Run, RunResult.run_id == Run.id)
-        .join(Job, Run.job_id == Job.id)
-        .join(PlannerRow, Job.planner_id == PlannerRow.id)
-        .join(AreaRow, Run.area_id == AreaRow.id)
-        .where(Run.status == RunState.SUCCEEDED.value, Run.preset == preset,
-               RunResult.benchmark_version == benchmark_version, AreaRow.split == split)
-    )
+    query = succeeded_results(
+        PlannerRow.name, PlannerRow.version, PlannerRow.builtin, AreaRow.name, RunResult,
+        preset=preset, benchmark_version=benchmark_version).where(AreaRow.split == split)
     if split != PUBLIC_SPLIT:  # one generation only: never ranked with another's areas
         query = query.where(AreaRow.heldout_generation == generation)
     if area is not None:

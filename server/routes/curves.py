@@ -19,7 +19,8 @@ from sqlalchemy.orm import Session
 
 from server.benchmark_versions import UnknownBenchmarkVersionError, check_known, current_version
 from server.deps import SessionDep
-from server.models import AreaRow, Job, MetricSeries, PlannerRow, Run, RunResult, RunState
+from server.models import AreaRow, MetricSeries, PlannerRow, Run
+from server.result_queries import succeeded_results
 from server.schemas import Band, Curves, ErrorBody, PlannerCurves
 
 router = APIRouter(tags=["leaderboard"])
@@ -68,16 +69,9 @@ def _grid(runs: list[tuple[Floats, Floats]], max_points: int) -> Floats:
 
 def build_curves(session: Session, preset: str, area: str, max_points: int, *,
                  benchmark_version: str) -> Curves:
-    query = (
-        select(PlannerRow.name, PlannerRow.version, PlannerRow.builtin, MetricSeries)
-        .join(Run, MetricSeries.run_id == Run.id)
-        .join(RunResult, RunResult.run_id == Run.id)
-        .join(Job, Run.job_id == Job.id)
-        .join(PlannerRow, Job.planner_id == PlannerRow.id)
-        .join(AreaRow, Run.area_id == AreaRow.id)
-        .where(Run.status == RunState.SUCCEEDED.value, Run.preset == preset,
-               AreaRow.name == area, RunResult.benchmark_version == benchmark_version)
-    )
+    query = (succeeded_results(PlannerRow.name, PlannerRow.version, PlannerRow.builtin,
+                               MetricSeries, preset=preset, benchmark_version=benchmark_version)
+             .join(MetricSeries, MetricSeries.run_id == Run.id).where(AreaRow.name == area))
     groups: dict[tuple[str, bool], list[MetricSeries]] = defaultdict(list)
     for name, version, builtin, series in session.execute(query):
         groups[(f"{name}-v{version}", builtin)].append(series)
