@@ -141,10 +141,25 @@ def compute_leaderboard(session: Session, preset: str, area: str | None = None, 
             e.fscore_rank = fs.get(e.planner)
     overall = _overall(entries, metrics)
     annotate(entries, overall, cells)
+    if split != PUBLIC_SPLIT:
+        _add_public_gaps(session, overall, preset, benchmark_version)
     return Leaderboard(preset=preset, split=split, heldout_generation=generation,
                        benchmark_version=benchmark_version,
                        metrics=metrics, areas=area_names, overall=overall, entries=entries,
                        statistics=STATISTICS)
+
+
+def _add_public_gaps(session: Session, overall: list[LeaderboardPlanner], preset: str,
+                     benchmark_version: str) -> None:
+    """Each held-out planner's public mean coverage and the gap to it (the overfitting signal).
+    A board of one held-out area is compared with the whole public board: its family is
+    secret."""
+    public = compute_leaderboard(session, preset, benchmark_version=benchmark_version)
+    scores = {p.planner: p.mean_coverage for p in public.overall}
+    for p in overall:
+        mine = scores.get(p.planner)
+        p.public_mean_coverage = mine
+        p.public_gap = None if mine is None else mine - p.mean_coverage
 
 
 def _overall(entries: list[LeaderboardEntry],

@@ -252,6 +252,12 @@ class LeaderboardPlanner(BaseModel):
         default_factory=dict, description="each of `Leaderboard.metrics`: the mean over areas "
         "of the per-area means (areas where it is undefined left out)")
     mean_coverage_ci: Interval | None = None
+    public_mean_coverage: float | None = Field(
+        default=None, description="on the held-out board: the planner's mean coverage on the "
+        "public board of the same preset and benchmark version (None without public results)")
+    public_gap: float | None = Field(
+        default=None, description="on the held-out board: public minus held-out mean coverage; "
+        "a large positive gap hints at tuning to the public areas")
     mean_relative_coverage_ci: Interval | None = None
     mean_fscore_ci: Interval | None = None
     mean_coverage_rank_ci: Interval | None = None

@@ -14,25 +14,14 @@ from sqlalchemy.orm import Session
 from server.heldout import current_generation
 from server.leaderboard import build_leaderboard
 from server.models import HELDOUT_SPLIT
-from server.schemas import Leaderboard
 from web.html import DASH, esc, num, planner_link, table, td
 
 
-def split_gaps(public: Leaderboard, heldout: Leaderboard) -> dict[str, float | None]:
-    """Per planner of the held-out board: public minus held-out mean coverage (None when the
-    planner has no public result)."""
-    scores = {p.planner: p.mean_coverage for p in public.overall}
-    return {p.planner: (scores[p.planner] - p.mean_coverage if p.planner in scores else None)
-            for p in heldout.overall}
-
-
-def heldout_section(session: Session, preset: str, version: str, public: Leaderboard) -> str:
+def heldout_section(session: Session, preset: str, version: str) -> str:
     """The held-out board's table, with each planner's public score and gap."""
     generation = current_generation(session)
     board = build_leaderboard(session, preset, benchmark_version=version,
                               scope=(HELDOUT_SPLIT, generation))
-    gaps = split_gaps(public, board)
-    scores = {p.planner: p.mean_coverage for p in public.overall}
     headers = [("Rank", "by mean coverage rank over the held-out areas"), ("Planner", ""),
                ("Areas", "held-out areas with results"),
                ("Held-out", "mean coverage over the held-out areas, %"),
@@ -41,7 +30,7 @@ def heldout_section(session: Session, preset: str, version: str, public: Leaderb
                        "positive gap hints at overfitting to the public areas")]
     rows = []
     for p in board.overall:
-        gap, mine = gaps.get(p.planner), scores.get(p.planner)
+        gap, mine = p.public_gap, p.public_mean_coverage
         rows.append(
             f"<tr data-planner='{esc(p.planner)}'>{td(str(p.rank), p.rank, 'num')}"
             f"{td(planner_link(p.planner, p.builtin), p.planner)}{td(str(p.areas), p.areas, 'num')}"

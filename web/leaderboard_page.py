@@ -296,7 +296,7 @@ def leaderboard_page(
         f"{_coverage_table(board)}"
         f"<p>Pareto set (coverage rank against F-score rank): <strong id='pareto-set'>"
         f"{esc(pareto)}</strong></p>"
-        f"{heldout_section(session, preset, version, board)}"
+        f"{heldout_section(session, preset, version)}"
         f"{_surface_table(board)}{_area_table(board, chosen)}"
         f"{_figures(preset, chosen, version)}"
         f"<h2>Jobs</h2>{recent_jobs_table(session, RECENT_JOBS)}"
