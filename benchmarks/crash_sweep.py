@@ -6,10 +6,11 @@
 
 By default the planners the leaderboard shows (each registered name's latest version) on the
 11 built-in areas, seed 0, the default preset, each area's plateau time. `--areas` also takes
-imported areas (`flybo areas import`). Each run is one episode in a process of its own, `--jobs`
-at a time. Finished runs are appended to `benchmarks/results/crash_sweep.jsonl` as they end, and
-a run already there (same planner id, area, seed, seconds and benchmark version) is not flown
-again: a stopped sweep resumes where it stopped.
+imported areas (`flybo areas import`) and `NAME@SEED`, a built-in area generated with another
+layout seed (as the held-out split's areas are). Each run is one episode in a process of its
+own, `--jobs` at a time. Finished runs are appended to `benchmarks/results/crash_sweep.jsonl` as
+they end, and a run already there (same planner id, area, seed, seconds and benchmark version)
+is not flown again: a stopped sweep resumes where it stopped.
 
 Each run's recording is kept in `--recordings` (default `benchmarks/results/crash_sweep/`):
 `--rescore` recomputes every stored run's coverage from its recording's final map against the
@@ -21,11 +22,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from areas.area import Area
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -43,14 +48,29 @@ def _recording_name(planner: str, area: str, seed: int) -> str:
     return f"{area}--{planner}--s{seed}.npz"
 
 
+def _area(name: str) -> Area:
+    """A registered area, or `NAME@SEED`: built-in area NAME generated with layout SEED (a
+    layout like the held-out split's, from a seed of the caller's choosing)."""
+    from areas import load_area
+    from areas.registry import generate_area
+
+    base, sep, seed = name.partition("@")
+    if not sep:
+        return load_area(name)
+    try:
+        return generate_area(base, int(seed))
+    except ValueError as exc:
+        raise SystemExit(f"--areas {name!r}: {exc}") from None
+
+
 def _run(planner: str, area_name: str, seed: int, seconds: float | None, benchmark: str,
          recordings: str) -> dict[str, Any]:
-    from areas import load_area, load_ground_truth
+    from areas import load_ground_truth
     from planners.registry import make, spec
     from sim.config import preset
     from sim.episode import run_episode
 
-    area = load_area(area_name)
+    area = _area(area_name)
     truth = load_ground_truth(area)
     planner_id = spec(planner).id
     wall0 = time.perf_counter()
@@ -65,6 +85,8 @@ def _run(planner: str, area_name: str, seed: int, seconds: float | None, benchma
         "fscore": result.surface.fscore, "collisions": result.collisions,
         "safety_stops": result.safety_stops, "path_length_m": result.path_length_m,
         "wall_s": time.perf_counter() - wall0, "recording": recording.name,
+        # The process flew this run alone (one task per process): its peak is the run's.
+        "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
     }
 
 
@@ -72,14 +94,14 @@ def _rescore(runs: list[dict[str, Any]], recordings: Path) -> None:
     """Coverage of every run recomputed from its recording against today's ground truth."""
     import numpy as np
 
-    from areas import load_area, load_ground_truth
+    from areas import load_ground_truth
     from sim.recording import Recording
 
     for run in runs:
         path = recordings / run["recording"]
         if not path.exists():
             continue
-        area = load_area(run["area"])
+        area = _area(run["area"])
         truth = load_ground_truth(area)
         rec = Recording(path)
         known = rec.map_state_at(float("inf")) != 0
@@ -135,7 +157,7 @@ def main() -> None:
                              "stay valid when only the ground truth changed")
     args = parser.parse_args()
 
-    from areas import area_names, load_area
+    from areas import area_names
     from flybo.versions import benchmark_version
     from planners.registry import spec
 
@@ -150,7 +172,7 @@ def main() -> None:
                 (args.planners.split(",") if args.planners else _default_planners())]
     areas = [a.strip() for a in args.areas.split(",")] if args.areas else area_names()
     for name in areas:
-        load_area(name)  # an unknown name fails here, before anything flies
+        _area(name)  # an unknown name fails here, before anything flies
     seeds = [int(s) for s in args.seeds.split(",")]
     args.recordings.mkdir(parents=True, exist_ok=True)
     have = {_key(r) for r in done}
