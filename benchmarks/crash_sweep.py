@@ -65,6 +65,8 @@ def _area(name: str) -> Area:
 
 def _run(planner: str, area_name: str, seed: int, seconds: float | None, benchmark: str,
          recordings: str) -> dict[str, Any]:
+    import numpy as np
+
     from areas import load_ground_truth
     from planners.registry import make, spec
     from sim.config import preset
@@ -85,6 +87,9 @@ def _run(planner: str, area_name: str, seed: int, seconds: float | None, benchma
         "fscore": result.surface.fscore, "collisions": result.collisions,
         "safety_stops": result.safety_stops, "path_length_m": result.path_length_m,
         "wall_s": time.perf_counter() - wall0, "recording": recording.name,
+        "iterations": result.iterations,
+        "planning_ms_median": (float(np.median(result.planning_times_ms))
+                               if len(result.planning_times_ms) else None),
         # The process flew this run alone (one task per process): its peak is the run's.
         "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
     }
