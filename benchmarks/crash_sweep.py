@@ -80,6 +80,7 @@ def _run(planner: str, area_name: str, seed: int, seconds: float | None, benchma
     result = run_episode(area, truth, make(planner_id), preset("default"), seed,
                          planner_name=planner_id, preset_name="default", seconds=seconds,
                          recording_path=recording)
+    usage = resource.getrusage(resource.RUSAGE_SELF)
     return {
         "planner": planner_id, "area": area_name, "seed": seed, "seconds": seconds,
         "benchmark": benchmark, "status": result.status.value, "reason": result.reason,
@@ -90,8 +91,10 @@ def _run(planner: str, area_name: str, seed: int, seconds: float | None, benchma
         "iterations": result.iterations,
         "planning_ms_median": (float(np.median(result.planning_times_ms))
                                if len(result.planning_times_ms) else None),
-        # The process flew this run alone (one task per process): its peak is the run's.
-        "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        # The process flew this run alone (one task per process): its peak and its CPU time
+        # (every thread's; what the run costs whatever else the machine runs) are the run's.
+        "peak_rss_mib": usage.ru_maxrss / 1024,
+        "cpu_s": usage.ru_utime + usage.ru_stime,
     }
 
 
