@@ -1,0 +1,86 @@
+"""The full suite's wall time on this machine, estimated per planner from measured CPU time.
+
+The paper's protocol is every planner on the 11 built-in areas, 5 runs each at the plateau
+time. `benchmarks/crash_sweep.py` flies each (planner, area) once at the plateau time, in a
+process of its own, and records that process's CPU time (`cpu_s`, every thread): what the run
+costs whatever else the machine is doing. The estimate of a planner's suite is
+
+    sum over the areas of cpu_s  x  runs  /  busy cores
+
+where `busy cores` is how many cores two worker processes keep busy between them on this
+2-core machine (1.73-1.80 measured by `benchmarks/worker_scaling.py`, `docs/performance-service.md`;
+default 1.75). The 5 runs of an area differ in seed only, so one run's CPU time stands for each.
+A planner with areas not yet flown gets a lower bound, marked as such.
+
+Run: `.venv/bin/python benchmarks/suite_estimate.py [--benchmark V] [--runs 5]
+[--busy-cores 1.75]` after (or while) `benchmarks/crash_sweep.py` runs. Target: the 7-planner
+suite under 3 hours (`docs/PERFORMANCE.md`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from benchmarks.common import print_table, write_json
+from benchmarks.crash_sweep import LOG
+
+
+def estimate(runs: list[dict[str, Any]], areas: list[str], *, repeats: int,
+             busy_cores: float) -> list[dict[str, Any]]:
+    """Per planner: the areas measured, their CPU seconds and the suite's estimated wall time."""
+    cpu: dict[str, dict[str, float]] = {}
+    for run in runs:
+        if run.get("cpu_s") is not None and run["area"] in areas and run["seed"] == 0:
+            cpu.setdefault(run["planner"], {})[run["area"]] = float(run["cpu_s"])
+    rows = []
+    for planner, per_area in sorted(cpu.items()):
+        total = sum(per_area.values())
+        rows.append({"planner": planner, "areas": len(per_area), "of": len(areas),
+                     "cpu_s": total, "wall_min": total * repeats / busy_cores / 60,
+                     "complete": len(per_area) == len(areas),
+                     "missing": sorted(set(areas) - set(per_area))})
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--benchmark", default=None, help="benchmark version (default: the tree's)")
+    parser.add_argument("--runs", type=int, default=5, help="runs per area in the suite")
+    parser.add_argument("--busy-cores", type=float, default=1.75)
+    args = parser.parse_args()
+    if args.runs < 1 or not args.busy_cores > 0:
+        raise SystemExit("--runs must be at least 1 and --busy-cores positive")
+    from areas import area_names
+    from flybo.versions import benchmark_version
+
+    version = args.benchmark or benchmark_version()
+    runs = [json.loads(line) for line in LOG.read_text().splitlines() if line.strip()] \
+        if LOG.exists() else []
+    runs = [r for r in runs if r["benchmark"] == version]
+    rows = estimate(runs, area_names(), repeats=args.runs, busy_cores=args.busy_cores)
+    if not rows:
+        raise SystemExit(f"no run of benchmark {version} in {LOG} records its CPU time: run "
+                         "benchmarks/crash_sweep.py first")
+    print_table(f"Suite wall time estimated from CPU time (benchmark {version}, {args.runs} runs "
+                f"per area, {args.busy_cores} busy cores)",
+                ["planner", "areas measured", "CPU s, one run per area", "suite, min"],
+                [[r["planner"], f"{r['areas']}/{r['of']}", f"{r['cpu_s']:.0f}",
+                  f"{r['wall_min']:.1f}" + ("" if r["complete"] else " (lower bound)")]
+                 for r in rows])
+    total = sum(r["wall_min"] for r in rows)
+    complete = all(r["complete"] for r in rows)
+    print(f"\nall planners: {total / 60:.2f} h{'' if complete else ' (lower bound)'}")
+    path = write_json("suite_estimate", {"benchmark": version, "runs": args.runs,
+                                         "busy_cores": args.busy_cores, "planners": rows,
+                                         "total_h": total / 60, "complete": complete})
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
