@@ -34,7 +34,7 @@ if TYPE_CHECKING:
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from benchmarks.common import RESULTS, print_table, write_json
+from benchmarks.common import RESULTS, peak_rss_mib, print_table, write_json
 
 LOG = RESULTS / "crash_sweep.jsonl"
 RECORDINGS = RESULTS / "crash_sweep"
@@ -65,12 +65,11 @@ def _area(name: str) -> Area:
 
 def _run(planner: str, area_name: str, seed: int, seconds: float | None, benchmark: str,
          recordings: str) -> dict[str, Any]:
-    import numpy as np
-
     from areas import load_ground_truth
     from planners.registry import make, spec
     from sim.config import preset
     from sim.episode import run_episode
+    from sim.metrics import timing_summary
 
     area = _area(area_name)
     truth = load_ground_truth(area)
@@ -81,6 +80,7 @@ def _run(planner: str, area_name: str, seed: int, seconds: float | None, benchma
                          planner_name=planner_id, preset_name="default", seconds=seconds,
                          recording_path=recording)
     usage = resource.getrusage(resource.RUSAGE_SELF)
+    planning = result.planning_times_ms
     return {
         "planner": planner_id, "area": area_name, "seed": seed, "seconds": seconds,
         "benchmark": benchmark, "status": result.status.value, "reason": result.reason,
@@ -89,11 +89,10 @@ def _run(planner: str, area_name: str, seed: int, seconds: float | None, benchma
         "safety_stops": result.safety_stops, "path_length_m": result.path_length_m,
         "wall_s": time.perf_counter() - wall0, "recording": recording.name,
         "iterations": result.iterations,
-        "planning_ms_median": (float(np.median(result.planning_times_ms))
-                               if len(result.planning_times_ms) else None),
+        "planning_ms_median": timing_summary(planning)["median"] if len(planning) else None,
         # The process flew this run alone (one task per process): its peak and its CPU time
         # (every thread's; what the run costs whatever else the machine runs) are the run's.
-        "peak_rss_mib": usage.ru_maxrss / 1024,
+        "peak_rss_mib": peak_rss_mib(),
         "cpu_s": usage.ru_utime + usage.ru_stime,
     }
 
@@ -117,7 +116,8 @@ def _rescore(runs: list[dict[str, Any]], recordings: Path) -> None:
         run["coverage"] = float(seen) / max(1, int(np.count_nonzero(truth.observable)))
 
 
-def _done(benchmark: str) -> list[dict[str, Any]]:
+def stored_runs(benchmark: str) -> list[dict[str, Any]]:
+    """The runs of `benchmark` stored in `LOG` (none before the first sweep)."""
     if not LOG.exists():
         return []
     runs = [json.loads(line) for line in LOG.read_text().splitlines() if line.strip()]
@@ -170,7 +170,7 @@ def main() -> None:
     from planners.registry import spec
 
     benchmark = benchmark_version()
-    done = _done(args.benchmark or benchmark)
+    done = stored_runs(args.benchmark or benchmark)
     if args.rescore:
         _rescore(done, args.recordings)
         _print(done)

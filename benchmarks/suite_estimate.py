@@ -20,7 +20,6 @@ suite under 3 hours (`docs/PERFORMANCE.md`).
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -28,7 +27,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks.common import print_table, write_json
-from benchmarks.crash_sweep import LOG
+from benchmarks.crash_sweep import LOG, stored_runs
 
 
 def estimate(runs: list[dict[str, Any]], areas: list[str], *, repeats: int,
@@ -60,9 +59,7 @@ def main() -> None:
     from flybo.versions import benchmark_version
 
     version = args.benchmark or benchmark_version()
-    runs = [json.loads(line) for line in LOG.read_text().splitlines() if line.strip()] \
-        if LOG.exists() else []
-    runs = [r for r in runs if r["benchmark"] == version]
+    runs = stored_runs(version)
     rows = estimate(runs, area_names(), repeats=args.runs, busy_cores=args.busy_cores)
     if not rows:
         raise SystemExit(f"no run of benchmark {version} in {LOG} records its CPU time: run "

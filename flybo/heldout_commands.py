@@ -26,9 +26,9 @@ def add_heldout_command(sub: Any) -> None:
 def run_heldout(args: argparse.Namespace) -> None:
     from flybo.local_commands import cli_settings, migrated
     from server.db import session_scope  # the service's code: on use
-    from server.heldout import current_generation, heldout_rows, rotate
+    from server.heldout import current_generation, heldout_rows, heldout_source, rotate
 
-    if len(args.note if args.heldout_command == "rotate" else "") > 1000:
+    if args.heldout_command == "rotate" and len(args.note) > 1000:
         raise CliError("--note must be at most 1000 characters")
     with session_scope(migrated(cli_settings())) as session:
         if args.heldout_command == "rotate":
@@ -40,5 +40,5 @@ def run_heldout(args: argparse.Namespace) -> None:
             return
         print(f"current held-out generation: {current_generation(session)}")
         for row in heldout_rows(session):
-            print(f"{row.name}  generation {row.heldout_generation}  "
-                  f"family {row.stats.get('family', '?')}")
+            family = (heldout_source(row.stats) or ("?", 0))[0]
+            print(f"{row.name}  generation {row.heldout_generation}  family {family}")

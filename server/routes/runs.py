@@ -15,7 +15,7 @@ from server.deps import IdPath, OptionalUserDep, SessionDep, SettingsDep, UserDe
 from server.jobs import may_manage
 from server.models import Artifact, Job, MetricSeries, Run, RunState, User
 from server.schemas import ArtifactOut, ErrorBody, ResultOut, RunOut, SeriesOut
-from server.split_access import HIDDEN_SCENE, refuse_hidden, scene_hidden
+from server.split_access import refuse_hidden, scene_hidden
 from server.storage import ArtifactStoreError, settings_store
 
 router = APIRouter(prefix="/runs", tags=["runs"])
@@ -38,12 +38,6 @@ def _load(session: Session, run_id: int) -> Run:
     if run is None:
         raise HTTPException(404, f"no run with id {run_id}")
     return run
-
-
-def _refuse_hidden_log(run: Run, user: User) -> None:
-    # A planner's own log lines may describe the scene it flew through.
-    if scene_hidden(run.area, user):
-        raise HTTPException(403, HIDDEN_SCENE)
 
 
 def _series(blob: bytes) -> list[float]:
@@ -134,7 +128,7 @@ def get_log(run_id: IdPath, session: SessionDep, settings: SettingsDep, user: Us
     run = _load(session, run_id)
     if not may_manage(user, run.job):
         raise HTTPException(403, "only the run's owner or an admin may read its log")
-    _refuse_hidden_log(run, user)
+    refuse_hidden(run.area, user, status=403)  # a planner's log may describe its scene
     text = run.log_tail
     artifact = next((a for a in run.artifacts if a.kind == "log"), None)
     if artifact is not None:
