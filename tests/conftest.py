@@ -65,17 +65,10 @@ def _is_slow(item: pytest.Item) -> bool:
 
 
 # `make test` spreads the tests over the cores (`pytest -n N --dist loadgroup`); a group runs in
-# one process, in order. The Redis tests share one group because the fault tests stop and restart
-# the Redis server itself; every other file is a group of its own, so that its module fixtures
-# (a service with finished jobs, say) start once.
-SHARED_REDIS = ("tests/faults/", "tests/server/test_end_to_end.py")
-
-
+# one process, in order. Every file is a group of its own, so that its module fixtures (a service
+# with finished jobs, say) start once.
 def xdist_group(item: pytest.Item) -> str:
-    node = item.nodeid
-    if any(node.startswith(entry) for entry in SHARED_REDIS):
-        return "redis"
-    return node.split("::", 1)[0]
+    return item.nodeid.split("::", 1)[0]
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

@@ -1,7 +1,8 @@
-"""A real scale-out stack for fault tests: the API and worker processes on this machine's
-PostgreSQL and Redis, with short heartbeat and sweep periods so that recoveries take seconds.
+"""A real scale-out stack for fault tests: the API and worker processes on PostgreSQL and Redis
+servers of these tests' own (`servers.py`: the tests restart them), with short heartbeat and sweep
+periods so that recoveries take seconds.
 
-Under CI=true an unreachable PostgreSQL or Redis fails these tests; elsewhere they skip.
+Under CI=true a PostgreSQL or Redis that cannot be started fails these tests; elsewhere they skip.
 """
 
 from __future__ import annotations
@@ -22,14 +23,13 @@ import httpx
 import pytest
 from sqlalchemy import create_engine, text
 
-POSTGRES_ADMIN_URL = os.environ.get("FLYBO_TEST_POSTGRES_URL",
-                                    "postgresql+psycopg://postgres@127.0.0.1:5432/test")
-REDIS_URL = os.environ.get("FLYBO_TEST_REDIS_URL", "redis://127.0.0.1:6379/14")
+from tests.faults.servers import PostgresServer, RedisServer
+
 FINAL = {"succeeded", "failed", "cancelled"}
 
 
 def _unavailable(what: str, why: str) -> None:
-    message = f"{what} is not reachable ({why})"
+    message = f"{what} is not available ({why})"
     if os.environ.get("CI") == "true":
         pytest.fail(message + "; under CI=true it must be")
     pytest.skip(message + "; set CI=true to make this a failure")
@@ -38,8 +38,9 @@ def _unavailable(what: str, why: str) -> None:
 class Stack:
     """API + workers as subprocesses, each in its own process group."""
 
-    def __init__(self, tmp: Path, db_url: str) -> None:
+    def __init__(self, tmp: Path, db_url: str, servers: Servers) -> None:
         self.db_url = db_url
+        self.servers = servers
         with socket.socket() as s:
             s.bind(("127.0.0.1", 0))
             self.port = int(s.getsockname()[1])
@@ -49,7 +50,7 @@ class Stack:
         self.env = {k: v for k, v in os.environ.items() if not k.startswith("FLYBO_")}
         self.env.update({
             "FLYBO_DATA_DIR": str(tmp / "data"), "FLYBO_DATABASE_URL": db_url,
-            "FLYBO_BROKER_URL": REDIS_URL, "FLYBO_HEARTBEAT_INTERVAL_S": "1",
+            "FLYBO_BROKER_URL": servers.redis.url, "FLYBO_HEARTBEAT_INTERVAL_S": "1",
             "FLYBO_HEARTBEAT_TIMEOUT_S": "6", "FLYBO_SWEEP_INTERVAL_S": "2",
             "FLYBO_REQUEUE_QUEUED_AFTER_S": "8", "FLYBO_MAX_ATTEMPTS": "10",
         })
@@ -130,37 +131,58 @@ class Stack:
                 self.kill(proc, signal.SIGTERM)
 
 
-@pytest.fixture
-def database(tmp_path: Path) -> Iterator[str]:
-    name = f"flybo_fault_{uuid.uuid4().hex[:8]}"
+class Servers:
+    """The session's own PostgreSQL and Redis."""
+
+    def __init__(self, postgres: PostgresServer, redis: RedisServer) -> None:
+        self.postgres = postgres
+        self.redis = redis
+
+
+@pytest.fixture(scope="session")
+def servers() -> Iterator[Servers]:
+    postgres: PostgresServer | None = None
+    redis: RedisServer | None = None
     try:
-        admin = create_engine(POSTGRES_ADMIN_URL, isolation_level="AUTOCOMMIT")
-        with admin.connect() as conn:
-            conn.execute(text(f'CREATE DATABASE "{name}"'))
-    except Exception as exc:
-        _unavailable("PostgreSQL", str(exc).splitlines()[0])
+        try:
+            postgres = PostgresServer()
+        except (OSError, subprocess.SubprocessError, AssertionError) as exc:
+            _unavailable("PostgreSQL", str(exc).splitlines()[0])
+        try:
+            redis = RedisServer()
+        except (OSError, subprocess.SubprocessError, AssertionError) as exc:
+            _unavailable("Redis", str(exc).splitlines()[0])
+        assert postgres is not None and redis is not None
+        yield Servers(postgres, redis)
+    finally:
+        if redis is not None:
+            redis.stop()
+        if postgres is not None:
+            postgres.stop()
+
+
+@pytest.fixture
+def database(servers: Servers) -> Iterator[str]:
+    """A fresh database on the session's PostgreSQL, and an empty Redis."""
     import redis
 
-    try:
-        redis.Redis.from_url(REDIS_URL, socket_connect_timeout=2).flushdb()
-    except Exception as exc:
-        _unavailable("Redis", str(exc).splitlines()[0])
+    name = f"flybo_fault_{uuid.uuid4().hex[:8]}"
+    admin = create_engine(servers.postgres.admin_url, isolation_level="AUTOCOMMIT")
+    with admin.connect() as conn:
+        conn.execute(text(f'CREATE DATABASE "{name}"'))
+    redis.Redis.from_url(servers.redis.url, socket_connect_timeout=2).flushdb()
     yield admin.url.set(database=name).render_as_string(hide_password=False)
-    for _ in range(5):
-        try:
-            with admin.connect() as conn:
-                conn.execute(text("SELECT pg_terminate_backend(pid) FROM pg_stat_activity "
-                                  f"WHERE datname = '{name}'"))
-                conn.execute(text(f'DROP DATABASE IF EXISTS "{name}"'))
-            break
-        except Exception:  # PostgreSQL may still be restarting after a test
-            time.sleep(2)
+    admin.dispose()  # its connection did not outlive a restart of the server
+    with admin.connect() as conn:
+        conn.execute(text("SELECT pg_terminate_backend(pid) FROM pg_stat_activity "
+                          f"WHERE datname = '{name}'"))
+        conn.execute(text(f'DROP DATABASE IF EXISTS "{name}"'))
     admin.dispose()
 
 
 @pytest.fixture
-def stack(tmp_path: Path, database: str) -> Iterator[Stack]:
-    s = Stack(tmp_path, database)
+def stack(tmp_path: Path, database: str, servers: Servers) -> Iterator[Stack]:
+    s = Stack(tmp_path, database, servers)
     try:
         yield s
     finally:

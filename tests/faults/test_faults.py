@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import os
 import signal
-import subprocess
 import time
 from typing import Any
 
@@ -75,10 +74,6 @@ def test_kill_9_ten_times(stack: Stack, database: str) -> None:
     assert all(w.poll() is None for w in stack.workers)  # the worker processes live on
 
 
-def _restart(command: list[str]) -> None:
-    subprocess.run(command, check=True, capture_output=True, timeout=120)
-
-
 def test_redis_then_postgres_restart_during_a_job(stack: Stack, database: str) -> None:
     stack.start_api()
     stack.start_worker()
@@ -89,15 +84,11 @@ def test_redis_then_postgres_restart_during_a_job(stack: Stack, database: str) -
         assert time.monotonic() < deadline, stack.tail()
         time.sleep(0.3)
     # Redis keeps nothing on disk here: queued messages are lost, the sweep sends them again.
-    subprocess.run(["redis-cli", "-p", "6379", "shutdown", "nosave"], capture_output=True,
-                   timeout=30)
+    stack.servers.redis.shutdown()
     time.sleep(2)
-    _restart(["redis-server", "--daemonize", "yes", "--bind", "127.0.0.1", "-::1", "--port",
-              "6379", "--save", "", "--appendonly", "no", "--dir", "/var/lib/redis",
-              "--logfile", "/var/log/redis/ci.log"])
+    stack.servers.redis.start()
     time.sleep(3)
-    cluster = os.listdir("/etc/postgresql")[0]
-    _restart(["pg_ctlcluster", "--skip-systemctl-redirect", cluster, "main", "restart"])
+    stack.servers.postgres.restart()
     final = stack.wait_job(job["id"], timeout=300)
     _exactly_one_result_each(stack, final)
 
