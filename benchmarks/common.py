@@ -16,7 +16,7 @@ from typing import Any
 
 import httpx
 
-import flybo  # noqa: F401  before NumPy loads: it pins the OpenBLAS kernels (flybo.blas)
+import flybo  # noqa: F401  before NumPy loads: it pins the CPU kernels (flybo.cpu_kernels)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 

@@ -13,6 +13,12 @@ import json
 from collections.abc import Callable
 from typing import Any
 
+from flybo.cpu_kernels import (
+    CORETYPE_ENV,
+    NUMPY_FEATURES_ENV,
+    PINNED_CORETYPE,
+    PINNED_NUMPY_DISABLED,
+)
 from flybo.module_sources import closure, package_sources, sorted_sources
 
 COMPONENTS = ("sim", "presets", "areas", "libraries")
@@ -100,7 +106,9 @@ def library_versions() -> dict[str, str]:
 
 
 def _libraries_hash() -> str:
-    return sha256_of(library_versions())
+    # With the CPU kernels they run on: another choice sums and rounds differently.
+    kernels = {CORETYPE_ENV: PINNED_CORETYPE, NUMPY_FEATURES_ENV: PINNED_NUMPY_DISABLED}
+    return sha256_of({**library_versions(), "cpu_kernels": kernels})
 
 
 _COMPONENT_HASHES: dict[str, Callable[[], str]] = {

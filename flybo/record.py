@@ -25,7 +25,7 @@ from typing import Any
 
 from areas.area import Area
 from flybo import versions
-from flybo.blas import blas_kernels
+from flybo.cpu_kernels import blas_kernels, numpy_simd
 from flybo.fingerprints import FLIGHT_LIBRARIES
 from sim.config import EpisodeConfig
 
@@ -136,9 +136,11 @@ def reproducibility_record(
         "libraries": {"python": platform.python_version(),
                       **{lib: attempt(lib, functools.partial(importlib.metadata.version, lib))
                          for lib in LIBRARIES},
-                      # Which OpenBLAS kernels ran: they shape the numbers (`flybo.blas`).
+                      # Which OpenBLAS kernels and NumPy loops ran: they shape the numbers
+                      # (`flybo.cpu_kernels`).
                       "openblas_kernels": attempt("openblas_kernels",
-                                                  lambda: ",".join(blas_kernels()))},
+                                                  lambda: ",".join(blas_kernels())),
+                      "numpy_simd": attempt("numpy_simd", lambda: ",".join(numpy_simd()))},
         "machine": {"cpu_model": attempt("cpu_model", _cpu_model),
                     "cores": os.cpu_count(), "speed_factor": speed_factor},
     }

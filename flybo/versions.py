@@ -13,9 +13,10 @@ presets and areas, and by the same planner code. This module names that code:
     imported by the registry), plus the canonical JSON of each built-in area's name, generator
     and parameters (layout seed included);
   - ``libraries``: the installed versions of the libraries whose numbers shape a flight
-    (``FLIGHT_LIBRARIES``: numpy, numba, Open3D, pybullet, ruckig, SciPy). The same code flies
-    differently with another release of one of them, so they are pinned exactly in
-    ``pyproject.toml``, and an environment with other releases runs a ``+modified`` version.
+    (``FLIGHT_LIBRARIES``: numpy, numba, Open3D, pybullet, ruckig, SciPy), and the CPU
+    kernels they are pinned to (`flybo.cpu_kernels`). The same code flies differently with
+    another release of one of them, so they are pinned exactly in ``pyproject.toml``, and an
+    environment with other releases runs a ``+modified`` version.
 
 - `benchmark_version()`: the short human name of those components (``2026.12-1``: year, month,
   and a counter), read from the lock file. When the tree's components differ from the lock's,

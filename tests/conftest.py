@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import pytest
 
-import flybo  # noqa: F401  first: it pins the OpenBLAS kernels before NumPy loads (flybo.blas)
+import flybo  # noqa: F401  first: it pins the CPU kernels before NumPy loads (flybo.cpu_kernels)
 
 SLOW = (
     # Whole files: each test starts services, fails them or floods them.

@@ -3,8 +3,9 @@
 A fingerprint is the SHA-256 of a run's `result.json` with the fields that measure the machine
 (wall time, per-frame costs, planning times in ms) left out, so that a change to how the episode
 is organised that keeps its behaviour keeps every fingerprint. A change that alters behaviour
-changes the benchmark version. The flights run on the pinned OpenBLAS kernels (`flybo.blas`;
-the script imports `flybo` first), as every flight of the benchmark does. Regenerate with
+changes the benchmark version. The flights run on the pinned OpenBLAS kernels and NumPy loops
+(`flybo.cpu_kernels`; the script imports `flybo` first), as every flight of the benchmark does.
+Regenerate with
 
     .venv/bin/python tests/sim/episode_fingerprints.py --write
 """
@@ -18,7 +19,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import flybo  # noqa: F401  before NumPy loads: it pins the OpenBLAS kernels
+import flybo  # noqa: F401  before NumPy loads: it pins the CPU kernels
 
 STORE = Path(__file__).with_name("episode_fingerprints.json")
 AREA = "maze"

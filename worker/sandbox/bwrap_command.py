@@ -102,7 +102,8 @@ def host_environment(work: Path) -> dict[str, str]:
 
 
 def _passed_on() -> dict[str, str]:
-    """What the planner process takes from the worker's environment: the OpenBLAS kernels the
-    worker's entry point chose (`flybo.blas`), so that a planner computes as in process."""
-    chosen = os.environ.get("OPENBLAS_CORETYPE")
-    return {"OPENBLAS_CORETYPE": chosen} if chosen else {}
+    """What the planner process takes from the worker's environment: the OpenBLAS kernels and
+    NumPy's SIMD loops the worker's entry point chose (`flybo.cpu_kernels`), so that a planner
+    computes as in process."""
+    names = ("OPENBLAS_CORETYPE", "NPY_DISABLE_CPU_FEATURES")
+    return {name: os.environ[name] for name in names if os.environ.get(name)}
