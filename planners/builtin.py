@@ -17,8 +17,8 @@ from planners.api import Planner
 from planners.classic import Classic, ClassicV2
 from planners.esm import EsmRecon, EsmV1
 from planners.esm_horizon import EsmHorizon, EsmReconHorizon
-from planners.falcon import Falcon
-from planners.fuel import Fuel
+from planners.falcon import Falcon, FalconV2
+from planners.fuel import Fuel, FuelV2
 from planners.nbvp import Nbvp
 from planners.rapid import Rapid, RapidV2
 from planners.splat import SplatPlanner, SplatPlannerV2
@@ -133,11 +133,23 @@ BUILTINS: tuple[tuple[str, int, type[Planner], str, str], ...] = (
         _FUEL_REFERENCE,
     ),
     (
+        "fuel", 2, FuelV2,
+        "As fuel-v1, but a frontier cluster without viewpoints samples them again at every "
+        "call, where fuel-v1 keeps it dormant until its voxels change.",
+        _FUEL_REFERENCE,
+    ),
+    (
         "falcon", 1, Falcon,
         "FUEL's frontier clusters guided by a coverage path: the explored map cut into cells "
         "and their free and unknown zones with a connectivity graph, an ATSP tour over the "
         "zones, the nearby frontiers ordered by a sequential ordering problem that keeps the "
         "tour's order; replanned in flight.",
+        _FALCON_REFERENCE,
+    ),
+    (
+        "falcon", 2, FalconV2,
+        "As falcon-v1, but a frontier cluster without viewpoints samples them again at every "
+        "call, as fuel-v2.",
         _FALCON_REFERENCE,
     ),
 )

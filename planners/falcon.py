@@ -70,6 +70,12 @@ class FalconConfig(FuelConfig):
     sop_max_frontiers: int = Field(10, ge=1, le=MAX_FRONTIERS)  # ours: the exact SOP's size
 
 
+class FalconV2Config(FalconConfig):
+    """falcon-v2: dormant clusters sample their viewpoints again at every call (as fuel-v2)."""
+
+    resample_dormant: bool = True
+
+
 class FalconPlanner(FuelPlanner):
     """The code of every FALCON version; `config_model` picks the version. FUEL's `plan` runs
     with FALCON's global tour (coverage path and ordering) and refinement."""
@@ -250,3 +256,10 @@ class Falcon(FalconPlanner):
 
     config_model = FalconConfig
     config: FalconConfig
+
+
+class FalconV2(FalconPlanner):
+    """falcon-v2."""
+
+    config_model = FalconV2Config
+    config: FalconV2Config

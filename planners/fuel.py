@@ -6,7 +6,7 @@ Every call (`planExploreMotion` of the public code's `fast_exploration_manager.c
 1. The frontier information structure (`planners.fuel_frontier`): clusters split to a bounded
    size, each with viewpoints on circles around it ranked by coverage. Viewpoints of a cluster
    whose voxels did not change are kept from the previous call (FUEL's incremental update),
-   those no longer traversable dropped.
+   those no longer traversable dropped; in v2 a cluster without viewpoints samples them again.
 2. The global tour: an asymmetric TSP over the vehicle and each cluster's best viewpoint (the
    first one `min_candidate_dist` away), costed by `planners.fuel_costs.pose_cost`, returning to
    the start for free (column 0 is zero), solved by `planners.tour` (LKH in FUEL).
@@ -86,6 +86,16 @@ class FuelConfig(PlannerConfig):
     give_up_radius_voxels: int = Field(2, ge=0)
     visited_view_reach_m: float | None = Field(3.5, gt=0.0)
     escape_reach_voxels: int = Field(10, ge=1)
+    # v2: a cluster without viewpoints (dormant) samples them again at every call, since the
+    # map around it may have opened up; v1 keeps it dormant until its voxels change, as FUEL's
+    # code does, where the framework's clearance (`docs/planners/fuel.md`) leaves more dormant.
+    resample_dormant: bool = False
+
+
+class FuelV2Config(FuelConfig):
+    """fuel-v2: dormant clusters sample their viewpoints again at every call."""
+
+    resample_dormant: bool = True
 
 
 class FuelPlanner(Planner):
@@ -180,7 +190,7 @@ class FuelPlanner(Planner):
 
     def _structure(self, view: MapView, given_up: BoolGrid) -> list[tuple[Cluster, Viewpoints]]:
         """Clusters with at least one viewpoint; an unchanged cluster's viewpoints are reused
-        (those still traversable)."""
+        (those still traversable; with `resample_dormant`, sampled again while there are none)."""
         cfg, ctx = self.config, self.context
         min_z = (None if cfg.min_frontier_height_m is None
                  else float(ctx.bounds_min[2]) + cfg.min_frontier_height_m)
@@ -192,12 +202,12 @@ class FuelPlanner(Planner):
         for cluster in found:
             key = cluster.voxels.tobytes()
             views = self._views.get(key)
-            if views is None:
-                views = sample_viewpoints(view, cluster, self._offsets, opaque, ctx.camera,
-                                          cfg.min_visib_num)
-            elif len(views):
+            if views is not None and len(views):
                 idx = view.world_to_index(views.positions)
                 views = views.take(view.traversable[idx[:, 0], idx[:, 1], idx[:, 2]])
+            if views is None or (len(views) == 0 and cfg.resample_dormant):
+                views = sample_viewpoints(view, cluster, self._offsets, opaque, ctx.camera,
+                                          cfg.min_visib_num)
             kept[key] = views
             if len(views):
                 out.append((cluster, views))
@@ -339,3 +349,10 @@ class Fuel(FuelPlanner):
 
     config_model = FuelConfig
     config: FuelConfig
+
+
+class FuelV2(FuelPlanner):
+    """fuel-v2."""
+
+    config_model = FuelV2Config
+    config: FuelV2Config

@@ -12,6 +12,7 @@ from planners.astar import PathCache
 from planners.fuel import Fuel, FuelConfig
 from planners.fuel_costs import PathLengths, pose_cost
 from planners.fuel_frontier import (
+    Viewpoints,
     clusters,
     coverage,
     downsample,
@@ -247,6 +248,30 @@ def test_finishes_without_coverable_frontier(make_stack: StackFactory) -> None:
     plan = planner.plan(Observation(0.0, Pose(CENTRE.copy(), 0.0), np.zeros(3), view,
                                     PlanOutcome.NONE))
     assert plan.done
+
+
+@pytest.mark.parametrize("planner_id", ["fuel-v1", "fuel-v2", "falcon-v1", "falcon-v2"])
+def test_a_cluster_without_viewpoints(make_stack: StackFactory, planner_id: str) -> None:
+    """v1 keeps a cluster left without viewpoints (its kept ones no longer traversable) dormant
+    until its voxels change; v2 samples its viewpoints again at every call."""
+    view = make_stack(_room_state(), VOXEL, SAFETY).view()
+    planner = make(planner_id)
+    planner.reset(_context())
+    given_up = np.zeros(SHAPE, dtype=np.bool_)
+    first = planner._structure(view, given_up)
+    assert len(first) == 1
+    cluster, views = first[0]
+    key = cluster.voxels.tobytes()
+    # The kept viewpoints now stand in the wall (as when the map closed in on them).
+    wall = np.full_like(views.positions, 0.05)
+    planner._views[key] = Viewpoints(wall, views.yaws, views.visible)
+    for _ in range(2):  # and stay so at the next call
+        again = planner._structure(view, given_up)
+        if planner_id.endswith("v1"):
+            assert again == []
+        else:
+            assert len(again) == 1
+            np.testing.assert_array_equal(again[0][1].positions, views.positions)
 
 
 @pytest.mark.slow
