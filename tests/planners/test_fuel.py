@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from planners.astar import PathCache
-from planners.fuel import Fuel, FuelConfig
+from planners.fuel import Fuel, FuelConfig, FuelV2
 from planners.fuel_costs import PathLengths, pose_cost
 from planners.fuel_frontier import (
     Viewpoints,
@@ -59,7 +59,7 @@ def _centres(voxels: np.ndarray) -> np.ndarray:
 def test_registered() -> None:
     planner = make("fuel-v1")
     assert isinstance(planner, Fuel)
-    assert isinstance(make("fuel"), Fuel)
+    assert isinstance(make("fuel"), FuelV2)  # the latest version
     config = make("fuel-v1", {"w_dir": 0.5}).config
     assert isinstance(config, FuelConfig)
     assert config.w_dir == 0.5
