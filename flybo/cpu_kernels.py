@@ -14,11 +14,11 @@ that imports it first. The kernels in use are part of each run's reproducibility
 (`flybo.record`), and `blas_kernels_pinned` says whether they are the pinned ones.
 
 NumPy, too, picks loops by CPU at load: on an AVX-512 machine its sine, cosine, arctangent and
-others come from other implementations than on an AVX2 one, and differ in the last bits; a
-viewpoint offset of d * cos(90 degrees) then falls in another voxel, and Classic flew
-differently on the two. ``NPY_DISABLE_CPU_FEATURES`` (read once, at load) turns NumPy's
-dispatch targets above AVX2 off, so every machine with AVX2 and FMA runs the same loops; the
-record names the targets in use (`numpy_simd`).
+others come from other implementations than on an AVX2 one, and differ in the last bits;
+Classic flew differently on the two (`docs/notes/2026-12-numpy-simd.md`).
+``NPY_DISABLE_CPU_FEATURES`` (read once, at load) turns NumPy's dispatch targets above AVX2 off,
+so every machine with AVX2 and FMA runs the same loops; the record names the targets in use
+(`numpy_simd`).
 """
 
 from __future__ import annotations
@@ -34,7 +34,6 @@ PINNED_CORETYPE = "Haswell"
 NUMPY_FEATURES_ENV = "NPY_DISABLE_CPU_FEATURES"
 # NumPy's x86-64 dispatch targets above AVX2 and FMA (X86_V3).
 PINNED_NUMPY_DISABLED = "X86_V4 AVX512_ICL AVX512_SPR"
-PINNED_ENV = (CORETYPE_ENV, NUMPY_FEATURES_ENV)
 # What the Haswell kernels execute beyond the x86-64 baseline.
 _NEEDED_FLAGS = frozenset({"avx2", "fma"})
 

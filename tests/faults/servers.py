@@ -12,11 +12,9 @@ import shutil
 import socket
 import subprocess
 import tempfile
-import time
-from collections.abc import Callable
 from pathlib import Path
 
-PG_BIN = Path("/usr/lib/postgresql")
+from tests.multihost.services import pg_tool, port_open, wait_until
 
 
 def free_port() -> int:
@@ -24,29 +22,6 @@ def free_port() -> int:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
 
-
-def _answers(port: int) -> bool:
-    try:
-        with socket.create_connection(("127.0.0.1", port), timeout=1):
-            return True
-    except OSError:
-        return False
-
-
-def wait_until(ready: Callable[[], bool], what: str, timeout_s: float = 60.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not ready():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"{what} within {timeout_s:g} s")
-        time.sleep(0.2)
-
-
-def pg_tool(tool: str) -> str:
-    found = sorted(PG_BIN.glob(f"*/bin/{tool}"))
-    if not found:
-        raise FileNotFoundError(f"PostgreSQL's {tool} is missing under {PG_BIN} "
-                                "(apt-get install postgresql)")
-    return str(found[-1])
 
 
 class PostgresServer:
@@ -80,7 +55,7 @@ class PostgresServer:
         """A fast shutdown (clients are disconnected), then a start; returns once it answers."""
         self._pg_ctl("stop", "-w", "-m", "fast")
         self.start()
-        wait_until(lambda: _answers(self.port), "PostgreSQL did not answer")
+        wait_until(lambda: port_open("127.0.0.1", self.port), "PostgreSQL")
 
     def stop(self) -> None:
         with contextlib.suppress(subprocess.CalledProcessError):  # it was not running
@@ -103,12 +78,12 @@ class RedisServer:
                         "--dir", str(self.folder), "--logfile", str(self.folder / "redis.log"),
                         "--pidfile", str(self.folder / "redis.pid")],
                        check=True, capture_output=True, timeout=30)
-        wait_until(lambda: _answers(self.port), "Redis did not answer")
+        wait_until(lambda: port_open("127.0.0.1", self.port), "Redis")
 
     def shutdown(self) -> None:
         subprocess.run(["redis-cli", "-p", str(self.port), "shutdown", "nosave"],
                        capture_output=True, timeout=30)
-        wait_until(lambda: not _answers(self.port), "Redis did not stop")
+        wait_until(lambda: not port_open("127.0.0.1", self.port), "the end of Redis")
 
     def stop(self) -> None:
         self.shutdown()

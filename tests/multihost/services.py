@@ -35,7 +35,7 @@ def wait_until(ready: Callable[[], bool], what: str, timeout_s: float = 90.0) ->
         time.sleep(0.3)
 
 
-def _port_open(address: str, port: int) -> bool:
+def port_open(address: str, port: int) -> bool:
     try:
         with socket.create_connection((address, port), timeout=1):
             return True
@@ -43,7 +43,7 @@ def _port_open(address: str, port: int) -> bool:
         return False
 
 
-def _pg_bin(tool: str) -> str:
+def pg_tool(tool: str) -> str:
     found = sorted(PG_BIN.glob(f"*/bin/{tool}"))
     if not found:
         raise AssertionError(f"PostgreSQL's {tool} is missing under {PG_BIN} (apt-get install "
@@ -59,15 +59,15 @@ def postgres(host: Host, logs: Path) -> Iterator[str]:
     try:
         shutil.chown(folder, "postgres", "postgres")
         data = folder / "data"
-        subprocess.run(["runuser", "-u", "postgres", "--", _pg_bin("initdb"), "-D", str(data),
+        subprocess.run(["runuser", "-u", "postgres", "--", pg_tool("initdb"), "-D", str(data),
                         "--auth=trust", "-U", "postgres"], check=True, capture_output=True)
         with (data / "pg_hba.conf").open("a") as hba:
             hba.write(f"host all all {host.address.rsplit('.', 1)[0]}.0/24 trust\n")
         env = {"PATH": os.environ.get("PATH", "/usr/bin:/bin")}
-        host.start([_pg_bin("postgres"), "-D", str(data), "-c",
+        host.start([pg_tool("postgres"), "-D", str(data), "-c",
                     f"listen_addresses={host.address}", "-p", str(PG_PORT), "-k", str(folder),
                     "-c", "fsync=off"], env, logs / "postgres.log", user="postgres")
-        wait_until(lambda: _port_open(host.address, PG_PORT), "PostgreSQL")
+        wait_until(lambda: port_open(host.address, PG_PORT), "PostgreSQL")
         yield f"postgresql+psycopg://postgres@{host.address}:{PG_PORT}/postgres"
     finally:
         shutil.rmtree(folder, ignore_errors=True)
@@ -78,7 +78,7 @@ def redis_server(host: Host, logs: Path) -> str:
     host.start(["redis-server", "--bind", host.address, "--port", str(REDIS_PORT), "--save", "",
                 "--appendonly", "no", "--protected-mode", "no"],
                {"PATH": os.environ.get("PATH", "")}, logs / "redis.log")
-    wait_until(lambda: _port_open(host.address, REDIS_PORT), "Redis")
+    wait_until(lambda: port_open(host.address, REDIS_PORT), "Redis")
     return f"redis://{host.address}:{REDIS_PORT}/0"
 
 
@@ -88,7 +88,7 @@ def s3_server(host: Host, logs: Path) -> str:
     host.start([sys.executable, "-m", "moto.server", "-H", host.address, "-p", str(S3_PORT)],
                env, logs / "s3.log")
     endpoint = f"http://{host.address}:{S3_PORT}"
-    wait_until(lambda: _port_open(host.address, S3_PORT), "the S3 server")
+    wait_until(lambda: port_open(host.address, S3_PORT), "the S3 server")
     import boto3
 
     boto3.client("s3", endpoint_url=endpoint, **_boto_credentials()).create_bucket(
