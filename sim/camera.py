@@ -2,6 +2,13 @@
 
 The camera sits at the vehicle centre, level, looking along body +x. Depth is z-depth (distance
 along the optical axis), not ray length, like a real depth sensor.
+
+Embree picks its intersection kernels by CPU (SSE, AVX2, AVX-512) and their hit distances
+differ in the last bit: on one frame of MAZE, 3,015 of 19,200 rays, by up to 1e-6 m, and a
+flight then takes other branches (`docs/notes/2026-12-embree-kernels.md`). The triangle each
+ray hits is the same on every kernel, so Embree only says *which* triangle; the distance along
+the ray is computed again here from that triangle's plane, in float64 with plain NumPy
+arithmetic, which every machine does alike.
 """
 
 from __future__ import annotations
@@ -14,6 +21,12 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from sim.geometry import FloatArray, Pose, yaw_matrix
 from sim.open3d_any import o3d
+
+# Embree's "no hit" primitive id.
+_NO_HIT = np.uint32(0xFFFFFFFF)
+# Below this |cos| between a ray and a triangle's normal the plane formula is ill-conditioned;
+# such grazing hits keep Embree's distance.
+_GRAZING_COS = 1e-6
 
 # Optical frame (x right, y down, z forward) expressed in the body frame (x forward, y left, z up).
 BODY_FROM_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
@@ -69,6 +82,8 @@ class DepthCamera:
             o3d.core.Tensor(np.ascontiguousarray(vertices, dtype=np.float32)),
             o3d.core.Tensor(np.ascontiguousarray(triangles, dtype=np.uint32)),
         )
+        self._normals, self._offsets = _triangle_planes(
+            np.asarray(vertices, dtype=np.float64), np.asarray(triangles, dtype=np.int64))
         k = self.config.intrinsic_matrix()
         u, v = np.meshgrid(
             np.arange(self.config.width) + 0.5, np.arange(self.config.height) + 0.5
@@ -123,11 +138,32 @@ class DepthCamera:
         rays = np.empty((unit_dirs.shape[0], 6), dtype=np.float32)
         rays[:, :3] = pose.position
         rays[:, 3:] = unit_dirs
-        t_hit = self._scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+        hits = self._scene.cast_rays(o3d.core.Tensor(rays))
+        t_hit = self._plane_distances(rays, hits["primitive_ids"].numpy(), hits["t_hit"].numpy())
         depth = (t_hit * inv_norm).astype(np.float32)  # ray length -> z-depth
         depth[(depth > cfg.max_range_m) | (depth < cfg.min_range_m)] = np.nan
         shape = (-(-cfg.height // stride), -(-cfg.width // stride))
         return DepthFrame(time=time, depth=depth.reshape(shape), pose=pose)
+
+    def _plane_distances(self, rays: npt.NDArray[np.float32], prims: npt.NDArray[np.uint32],
+                         t_embree: npt.NDArray[np.float32]) -> FloatArray:
+        """(N,) distances along `rays` (N, 6: origin, unit direction) to the planes of the hit
+        triangles `prims`; inf where nothing was hit."""
+        t = np.full(prims.shape, np.inf)
+        hit = np.flatnonzero(prims != _NO_HIT)
+        if hit.size == 0:
+            return t
+        ids = prims[hit].astype(np.int64)
+        n = self._normals[ids]
+        o = rays[hit, :3].astype(np.float64)
+        d = rays[hit, 3:].astype(np.float64)
+        # Written out rather than as a dot product: BLAS and einsum may fuse or reorder.
+        denom = n[:, 0] * d[:, 0] + n[:, 1] * d[:, 1] + n[:, 2] * d[:, 2]
+        num = self._offsets[ids] - (n[:, 0] * o[:, 0] + n[:, 1] * o[:, 1] + n[:, 2] * o[:, 2])
+        steep = np.abs(denom) > _GRAZING_COS
+        exact = np.where(steep, num / np.where(steep, denom, 1.0), t_embree[hit])
+        t[hit] = exact
+        return t
 
     def back_project(
         self, depth: npt.NDArray[np.float32], pose: Pose, stride: int = 1
@@ -148,3 +184,17 @@ class DepthCamera:
         points_optical = dirs * z[:, None]
         endpoints = points_optical @ self.world_from_optical(pose.yaw).T + pose.position
         return endpoints, hit
+
+
+def _triangle_planes(vertices: FloatArray, triangles: npt.NDArray[np.int64]
+                     ) -> tuple[FloatArray, FloatArray]:
+    """Unit normals (F, 3) and offsets (F,) of the triangles' planes (n . x = offset); zero
+    normals for degenerate triangles."""
+    v0, v1, v2 = (vertices[triangles[:, i]] for i in range(3))
+    e1, e2 = v1 - v0, v2 - v0
+    n = np.stack([e1[:, 1] * e2[:, 2] - e1[:, 2] * e2[:, 1],
+                  e1[:, 2] * e2[:, 0] - e1[:, 0] * e2[:, 2],
+                  e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]], axis=1)
+    length = np.sqrt(n[:, 0] * n[:, 0] + n[:, 1] * n[:, 1] + n[:, 2] * n[:, 2])
+    n = n / np.where(length > 0.0, length, 1.0)[:, None]
+    return n, n[:, 0] * v0[:, 0] + n[:, 1] * v0[:, 1] + n[:, 2] * v0[:, 2]

@@ -263,3 +263,28 @@ def test_distance_to_surface() -> None:
     # Outside, off a corner: distance to the corner point (4, 4, 3).
     assert cam.distance_to_surface(np.array([5.0, 6.0, 5.0])) == pytest.approx(3.0, abs=1e-5)
     assert cam.distance_to_surface(np.array([4.0, 1.0, 1.0])) == pytest.approx(0.0, abs=1e-6)
+
+
+class _NudgedScene:
+    """Embree's scene with every hit distance moved by a few float32 ulps, as another CPU's
+    intersection kernels return them."""
+
+    def __init__(self, scene: o3d.t.geometry.RaycastingScene) -> None:
+        self._scene = scene
+
+    def cast_rays(self, rays: o3d.core.Tensor) -> dict[str, o3d.core.Tensor]:
+        hits = self._scene.cast_rays(rays)
+        t = hits["t_hit"].numpy()
+        nudged = np.where(np.isfinite(t), t * np.float32(1.0 + 3e-7), t).astype(np.float32)
+        return {"t_hit": o3d.core.Tensor(nudged), "primitive_ids": hits["primitive_ids"]}
+
+
+def test_depth_does_not_depend_on_embree_distances() -> None:
+    cfg = CameraConfig(max_range_m=10.0)
+    cam = camera(cfg)
+    pose = Pose(np.array([1.3, 1.7, 1.1]), 0.4)
+    plain = cam.render(pose).depth
+    cam._scene = _NudgedScene(cam._scene)  # type: ignore[assignment]
+    assert np.array_equal(cam.render(pose).depth, plain)
+    # ... and the distance from the triangles' planes is at least as close to the truth.
+    assert np.allclose(plain, analytic_depth(cfg, pose.position, pose.yaw), rtol=0.0, atol=1e-5)
