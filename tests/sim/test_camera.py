@@ -276,7 +276,7 @@ class _NudgedScene:
         hits = self._scene.cast_rays(rays)
         t = hits["t_hit"].numpy()
         nudged = np.where(np.isfinite(t), t * np.float32(1.0 + 3e-7), t).astype(np.float32)
-        return {"t_hit": o3d.core.Tensor(nudged), "primitive_ids": hits["primitive_ids"]}
+        return {"t_hit": o3d.core.Tensor.from_numpy(nudged), "primitive_ids": hits["primitive_ids"]}
 
 
 def test_depth_does_not_depend_on_embree_distances() -> None:
@@ -284,7 +284,7 @@ def test_depth_does_not_depend_on_embree_distances() -> None:
     cam = camera(cfg)
     pose = Pose(np.array([1.3, 1.7, 1.1]), 0.4)
     plain = cam.render(pose).depth
-    cam._scene = _NudgedScene(cam._scene)  # type: ignore[assignment]
+    cam._scene = _NudgedScene(cam._scene)
     assert np.array_equal(cam.render(pose).depth, plain)
     # ... and the distance from the triangles' planes is at least as close to the truth.
     assert np.allclose(plain, analytic_depth(cfg, pose.position, pose.yaw), rtol=0.0, atol=1e-5)
