@@ -318,6 +318,10 @@ def _write_atomic(path: Path, truth: GroundTruth, content_hash: str) -> None:
         raise
 
 
+# Points decoded per slice by `_unpack_points`.
+_DECODE_ROWS = 1 << 20
+
+
 def _pack_points(points: npt.NDArray[np.float32]) -> dict[str, npt.NDArray[np.generic]]:
     """Arrays storing (N, 3) points: uint16 steps of at most QUANTUM from their minimum corner
     (6 bytes a point, half of float32: the large areas hold tens of millions of samples), or
@@ -336,7 +340,14 @@ def _unpack_points(data: Any) -> npt.NDArray[np.float32]:
     """(N, 3) float32 points from what `_pack_points` stored."""
     if "surface_codes" in data:
         codes = data["surface_codes"]
-        return (codes * data["surface_step"] + data["surface_origin"]).astype(np.float32)
+        step, origin = data["surface_step"], data["surface_origin"]
+        points = np.empty(codes.shape, dtype=np.float32)
+        # In slices: decoding all at once makes two float64 copies of the cloud (tens of
+        # millions of points on the large areas: most of a run's peak memory).
+        for start in range(0, len(codes), _DECODE_ROWS):
+            rows = slice(start, start + _DECODE_ROWS)
+            points[rows] = codes[rows] * step + origin
+        return points
     return np.asarray(data["surface_points"], dtype=np.float32)
 
 
