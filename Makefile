@@ -55,9 +55,8 @@ run: install
 demo-run: install
 	$(BIN)/flybo run --area maze --planner classic --seed 0 --out data/runs/maze-classic-$$(date +%Y%m%d-%H%M%S)
 
-# Tests run in TEST_JOBS processes (pytest-xdist), a test file's tests all in one, so that its
-# module and session fixtures (a flown suite, a service with finished jobs) start once;
-# TEST_JOBS=0 runs them in this process.
+# Tests run in TEST_JOBS processes (pytest-xdist; tests/conftest.py keeps what must run together in
+# one); TEST_JOBS=0 runs them in this process.
 TEST_JOBS ?= $(shell nproc)
 
 # Everything: lint, types and every test (the slow ones, the browser tests and the wheel's
@@ -65,14 +64,14 @@ TEST_JOBS ?= $(shell nproc)
 test: install test-system-deps
 	$(BIN)/ruff check .
 	$(BIN)/mypy
-	$(BIN)/pytest -n $(TEST_JOBS) --dist loadfile
+	$(BIN)/pytest -n $(TEST_JOBS) --dist loadgroup
 
 # The inner loop, a few minutes: lint, types and the tests not marked `slow` (tests/conftest.py
 # marks the long ones of every folder). Needs no browser.
 test-fast: install
 	$(BIN)/ruff check .
 	$(BIN)/mypy
-	$(BIN)/pytest -n $(TEST_JOBS) --dist loadfile -m "not slow"
+	$(BIN)/pytest -n $(TEST_JOBS) --dist loadgroup -m "not slow"
 
 benchmark: install benchmark-system-deps
 	$(BIN)/python benchmarks/sim_speed.py
