@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from areas.surface_cloud import SurfaceCloud
+
 FloatArray = npt.NDArray[np.float64]
 
 
@@ -104,7 +106,8 @@ class GroundTruth:
     Attributes:
         observable: (nx, ny, nz) bool on the area's occupancy grid: the free voxels a camera on
             the vehicle can see from where it can fly, plus the surface layer those voxels touch.
-        surface_points: (N, 3) float32 dense samples of the perceivable surfaces, metres.
+        surface: dense samples of the perceivable surfaces (N points, metres), held packed;
+            ``surface_points`` decodes them all, ``surface.sample(n)`` a fixed subsample.
         voxel_size: edge of the ``observable`` voxels in metres.
         free_volume_m3: free space 6-connected to the start, m³ (what a point could reach).
         reachable_volume_m3: the part of it the vehicle's centre can reach, m³.
@@ -114,11 +117,16 @@ class GroundTruth:
     """
 
     observable: npt.NDArray[np.bool_]
-    surface_points: npt.NDArray[np.float32]
+    surface: SurfaceCloud
     voxel_size: float
     free_volume_m3: float = 0.0
     reachable_volume_m3: float = 0.0
     observable_free_m3: float = 0.0
+
+    @property
+    def surface_points(self) -> npt.NDArray[np.float32]:
+        """(N, 3) float32: every surface sample, decoded afresh on each access (hold the result)."""
+        return self.surface.points()
 
     @property
     def unobservable_free_m3(self) -> float:

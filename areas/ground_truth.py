@@ -50,6 +50,7 @@ from scipy import ndimage
 from areas.area import Area, GroundTruth
 from areas.cache import cache_dir
 from areas.observability import ViewModel, observability
+from areas.surface_cloud import SurfaceCloud
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -61,9 +62,6 @@ FORMAT_VERSION = 3
 # Triangles are sampled in chunks of about this many points, so that the large areas (tens of
 # millions of samples at 2 cm) never hold all float64 samples and their normals at once.
 SAMPLE_CHUNK_POINTS = 1 << 21
-# Largest step of the stored point coordinates: clouds up to 65 m a side are stored as uint16
-# steps (a rounding error of at most 0.5 mm, against a 2 cm sample spacing and 5 cm metrics).
-QUANTUM = 1e-3
 # Margin on the blocking radius, as a fraction of the voxel size: distances come back in float32,
 # and a wall lying exactly on voxel faces must block the voxels touching it on both sides.
 BLOCK_RADIUS_MARGIN = 1e-3
@@ -242,7 +240,7 @@ def compute_ground_truth(
     observable = visible | layer.reshape(area.grid_shape)
     return GroundTruth(
         observable=observable,
-        surface_points=np.concatenate(kept) if kept else np.zeros((0, 3), dtype=np.float32),
+        surface=SurfaceCloud.of(np.concatenate(kept) if kept else np.zeros((0, 3), np.float32)),
         voxel_size=area.voxel_size,
         **volumes,
     )
@@ -306,7 +304,7 @@ def _write_atomic(path: Path, truth: GroundTruth, content_hash: str) -> None:
                 "voxel_size": np.float64(truth.voxel_size),
                 "volumes_m3": np.array([truth.free_volume_m3, truth.reachable_volume_m3,
                                         truth.observable_free_m3]),
-                **_pack_points(truth.surface_points),
+                **truth.surface.packed().arrays(),
             }
             np.savez(f, **arrays)
         # mkstemp creates the file private to its owner; the cache is readable like any other file.
@@ -316,39 +314,6 @@ def _write_atomic(path: Path, truth: GroundTruth, content_hash: str) -> None:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
-
-
-# Points decoded per slice by `_unpack_points`.
-_DECODE_ROWS = 1 << 20
-
-
-def _pack_points(points: npt.NDArray[np.float32]) -> dict[str, npt.NDArray[np.generic]]:
-    """Arrays storing (N, 3) points: uint16 steps of at most QUANTUM from their minimum corner
-    (6 bytes a point, half of float32: the large areas hold tens of millions of samples), or
-    float32 when the cloud is too large for that step."""
-    if len(points) == 0:
-        return {"surface_points": points}
-    lo = points.min(axis=0).astype(np.float64)
-    step = np.maximum((points.max(axis=0) - lo) / 65535.0, 1e-9)
-    if np.any(step > QUANTUM):
-        return {"surface_points": points}
-    codes = np.rint((points - lo) / step).astype(np.uint16)
-    return {"surface_codes": codes, "surface_origin": lo, "surface_step": step}
-
-
-def _unpack_points(data: Any) -> npt.NDArray[np.float32]:
-    """(N, 3) float32 points from what `_pack_points` stored."""
-    if "surface_codes" in data:
-        codes = data["surface_codes"]
-        step, origin = data["surface_step"], data["surface_origin"]
-        points = np.empty(codes.shape, dtype=np.float32)
-        # In slices: decoding all at once makes two float64 copies of the cloud (tens of
-        # millions of points on the large areas: most of a run's peak memory).
-        for start in range(0, len(codes), _DECODE_ROWS):
-            rows = slice(start, start + _DECODE_ROWS)
-            points[rows] = codes[rows] * step + origin
-        return points
-    return np.asarray(data["surface_points"], dtype=np.float32)
 
 
 def _read(path: Path, area: Area) -> GroundTruth | None:
@@ -365,12 +330,12 @@ def _read(path: Path, area: Area) -> GroundTruth | None:
                 return None
             count = int(np.prod(area.grid_shape))
             bits = np.unpackbits(data["observable"], count=count).astype(bool)
-            points = _unpack_points(data)
+            surface = SurfaceCloud.from_arrays(data)
             free, reachable, observable_free = (float(v) for v in data["volumes_m3"])
     except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):
         return None
     return GroundTruth(
-        observable=bits.reshape(area.grid_shape), surface_points=points, voxel_size=area.voxel_size,
+        observable=bits.reshape(area.grid_shape), surface=surface, voxel_size=area.voxel_size,
         free_volume_m3=free, reachable_volume_m3=reachable, observable_free_m3=observable_free,
     )
 
@@ -387,8 +352,7 @@ def load_ground_truth(area: Area) -> GroundTruth:
         truth = compute_ground_truth(area)
         # Keep the stored (rounded) coordinates in memory too: a worker that computed the
         # ground truth and one that read it from the cache then score runs identically.
-        packed = _pack_points(truth.surface_points)
-        truth = replace(truth, surface_points=_unpack_points(packed))
+        truth = replace(truth, surface=truth.surface.packed())
         _write_atomic(path, truth, key)
     _memory_cache[key] = truth
     return truth

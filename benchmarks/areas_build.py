@@ -123,7 +123,7 @@ def _measure(seconds: float, area_list: str | None) -> None:
         rows[name].update(mesh_s=t1 - t0, ground_truth_s=t2 - t1, thumbnails_s=t3 - t2,
                           build_s=t3 - t0, build_cpu_s=time.process_time() - c0,
                           faces=len(area.triangles),
-                          surface_points=len(truth.surface_points),
+                          surface_points=len(truth.surface),
                           cache_mib=ground_truth_path(area).stat().st_size / 2**20)
         print(f"built {name} in {t3 - t0:.1f} s", flush=True)
     build_total = time.perf_counter() - began

@@ -25,7 +25,6 @@ from sim import metrics
 from sim.camera import DepthCamera
 from sim.config import preset
 from sim.episode import run_episode
-from sim.measures.series import subsample
 
 
 def main() -> None:
@@ -39,7 +38,7 @@ def main() -> None:
     cfg = preset("exact")
     result = run_episode(area, truth, make(args.planner), cfg, 0, seconds=args.seconds)
     camera = DepthCamera(area.vertices, area.triangles, cfg.camera)
-    cloud = subsample(truth.surface_points, cfg.final_recall_points)
+    cloud = truth.surface.sample(cfg.final_recall_points)
     rows, out = [], []
     tolerance = metrics.TIE_TOLERANCE_M
     for tol in (0.0, tolerance):

@@ -249,7 +249,7 @@ def _build_areas(name: str) -> None:
         print(f"{area.name:<12} mesh {generated - began:5.1f} s  ground truth "
               f"{truthed - generated:5.1f} s{' (cached)' if cached else ''}  thumbnails "
               f"{done - truthed:4.1f} s  {len(area.triangles):>8,} faces  "
-              f"{len(truth.surface_points):>11,} surface points", flush=True)
+              f"{len(truth.surface):>11,} surface points", flush=True)
     print(f"built {len(names)} area(s) in {time.perf_counter() - total:.1f} s; "
           f"thumbnails in {top.parent}")
 

@@ -10,7 +10,6 @@ import numpy as np
 import numpy.typing as npt
 
 from sim.measures.base import EpisodeEnd, EpisodeView, Measure, MetricInfo
-from sim.measures.series import subsample
 from sim.metrics import SurfaceScores, coverage, surface_scores
 
 
@@ -79,7 +78,7 @@ class SurfaceQuality(Measure):
     )
 
     def reset(self, ep: EpisodeView) -> None:
-        self.truth = subsample(ep.truth.surface_points, ep.config.final_recall_points)
+        self.truth = ep.truth.surface.sample(ep.config.final_recall_points)
 
     def result(self, ep: EpisodeView, end: EpisodeEnd, done: Mapping[str, Any]) -> SurfaceScores:
         mesh: Mesh = done["reconstruction"]

@@ -81,19 +81,6 @@ class ExploredVolume(_Sampled):
         return ep.mapping.occupancy.explored_volume_m3
 
 
-# Truth points are subsampled with one fixed seed, never the run's: every run of an area is
-# scored against the same points, whatever its seed.
-TRUTH_SAMPLE_SEED = 0
-
-
-def subsample(points: npt.NDArray[np.float32], count: int) -> npt.NDArray[np.float32]:
-    """At most `count` of `points`, the same ones for every run, in their original order."""
-    if len(points) <= count:
-        return points
-    rng = np.random.default_rng(TRUTH_SAMPLE_SEED)
-    return points[np.sort(rng.choice(len(points), size=count, replace=False))]
-
-
 class RecallSeries(_Sampled):
     """Surface recall read off the live TSDF (`sdf_surface_recall`) every `recall_interval_s`,
     over a fixed sample of `recall_sample_points` truth points."""
@@ -106,7 +93,7 @@ class RecallSeries(_Sampled):
 
     def reset(self, ep: EpisodeView) -> None:
         super().reset(ep)
-        self.points = subsample(ep.truth.surface_points, ep.config.recall_sample_points)
+        self.points = ep.truth.surface.sample(ep.config.recall_sample_points)
 
     def _sample(self, ep: EpisodeView, stamp: float) -> float:
         sdf, weight = ep.tsdf.sdf_at(self.points)

@@ -211,20 +211,3 @@ def test_corrupt_cache_file_is_recomputed(tmp_path: Path, monkeypatch: pytest.Mo
     truth = load_ground_truth(area)
     assert np.count_nonzero(truth.observable) == 20**3
     assert ground_truth._read(path, area) is not None
-
-
-def test_stored_points_decode_in_slices_to_the_same_cloud(monkeypatch: pytest.MonkeyPatch) -> None:
-    # Slices of 1,000 rows over 2,500 points: whole slices and a partial last one.
-    monkeypatch.setattr(ground_truth, "_DECODE_ROWS", 1000)
-    rng = np.random.default_rng(3)
-    points = rng.uniform([-5.0, 2.0, 0.0], [40.0, 30.0, 12.0], size=(2500, 3)).astype(np.float32)
-    packed = ground_truth._pack_points(points)
-    assert "surface_codes" in packed
-    codes = packed["surface_codes"].astype(np.float64)
-    step = packed["surface_step"].astype(np.float64)
-    origin = packed["surface_origin"].astype(np.float64)
-    whole = (codes * step + origin).astype(np.float32)
-    decoded = ground_truth._unpack_points(packed)
-    assert decoded.dtype == np.float32
-    assert np.array_equal(decoded, whole)
-    assert float(np.abs(decoded - points).max()) <= ground_truth.QUANTUM

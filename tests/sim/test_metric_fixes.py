@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from areas import load_area, load_ground_truth
+from areas.surface_cloud import SurfaceCloud
 from planners.registry import make
 from sim.config import preset
 from sim.episode import run_episode
@@ -40,8 +41,8 @@ def _view(seed: int) -> EpisodeView:
     points = np.random.default_rng(7).random((50_000, 3)).astype(np.float32)
     cfg = preset("default").model_copy(update={"final_recall_points": 1000,
                                                "recall_sample_points": 1000})
-    return cast(EpisodeView, SimpleNamespace(truth=SimpleNamespace(surface_points=points),
-                                             config=cfg, seed=seed))
+    truth = SimpleNamespace(surface=SurfaceCloud.of(points))
+    return cast(EpisodeView, SimpleNamespace(truth=truth, config=cfg, seed=seed))
 
 
 def test_the_truth_sample_does_not_depend_on_the_run_seed() -> None:
