@@ -7,7 +7,10 @@ Each run flies alone in a fresh process (seed 0, the area's plateau time unless 
 which reads its resident set (`VmRSS`) and its peak so far (`ru_maxrss`) after the libraries are
 imported, after the area and its ground truth are loaded, and at the end of the run (the final
 reconstruction and its scoring included). It also reports the bytes the ground
-truth's surface cloud keeps resident for the whole run.
+truth's surface cloud keeps resident for the whole run, and the final reconstruction's own
+peak: the resident set before the TSDF is meshed and the highest resident set while it is
+(the kernel's high-water mark, reset just before: `/proc/self/clear_refs`), and how long the
+meshing took.
 
 `--baseline DIR` flies every run a second time with the code of another tree (an unpacked
 `git archive` of an earlier commit), interleaved with this tree's runs, and prints the ratios
@@ -41,6 +44,30 @@ def _vm_rss_mib() -> float:
     return float("nan")
 
 
+def _vm_hwm_mib() -> float:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def _watch_reconstruction(stages: dict[str, Any]) -> None:
+    """Record resident memory before the TSDF is meshed and its high-water mark while it is."""
+    from sim.tsdf import TsdfVolume
+
+    mesh = TsdfVolume.mesh
+
+    def watched(self: Any) -> Any:
+        before = _vm_rss_mib()
+        Path("/proc/self/clear_refs").write_text("5")  # resets VmHWM to the resident set
+        t0 = time.perf_counter()
+        out = mesh(self)
+        stages["reconstruction"] = (before, _vm_hwm_mib(), time.perf_counter() - t0)
+        return out
+
+    TsdfVolume.mesh = watched  # type: ignore[method-assign]
+
+
 def _child(planner: str, area_name: str, seconds: float | None,
            preset_name: str) -> dict[str, Any]:
     """One flight, in this process, with the code of the tree it was started in."""
@@ -51,6 +78,7 @@ def _child(planner: str, area_name: str, seconds: float | None,
     from sim.episode import run_episode
 
     stages: dict[str, Any] = {"imported": (_vm_rss_mib(), _peak_rss_mib())}
+    _watch_reconstruction(stages)
     area = load_area(area_name)
     truth = load_ground_truth(area)
     stages["truth_loaded"] = (_vm_rss_mib(), _peak_rss_mib())
@@ -116,15 +144,23 @@ def main(argv: list[str] | None = None) -> int:
                      f"{100 * r['coverage']:.1f}", f"{100 * r['fscore']:.2f}",
                      f"{r['cloud_mib']:.0f}", f"{s['imported'][0]:.0f}",
                      f"{s['truth_loaded'][0]:.0f}", f"{s['truth_loaded'][1]:.0f}",
+                     f"{s['reconstruction'][0]:.0f}", f"{s['reconstruction'][1]:.0f}",
                      f"{s['run_ended'][0]:.0f}", f"{s['run_ended'][1]:.0f}"])
     print_table(f"Memory of one run (MiB; preset {args.preset}, seed 0)",
                 ["tree", "planner", "area", "until s", "coverage %", "F %", "truth cloud",
-                 "imported", "truth loaded", "peak so far", "run ended", "peak"], rows)
+                 "imported", "truth loaded", "peak so far", "before mesh", "meshing peak",
+                 "run ended", "peak"], rows)
     if args.baseline:
-        print("\nratio this / baseline (peak of the whole run):")
+        print("\nratio this / baseline (peak of the whole run; meshing peak above the resident"
+              " set before it):")
         for this, base in zip(runs[0::2], runs[1::2], strict=True):
             ratio = this["stages"]["run_ended"][1] / base["stages"]["run_ended"][1]
-            print(f"  {this['planner']} {this['area']}: {ratio:.3f}")
+            mesh_this, mesh_base = (r["stages"]["reconstruction"][1]
+                                    - r["stages"]["reconstruction"][0] for r in (this, base))
+            seconds = this["stages"]["reconstruction"][2] / base["stages"]["reconstruction"][2]
+            print(f"  {this['planner']} {this['area']}: whole run {ratio:.3f}; meshing "
+                  f"{mesh_this:.0f} vs {mesh_base:.0f} MiB ({mesh_this / mesh_base:.3f}), "
+                  f"its time {seconds:.2f}x")
     path = write_json("run_memory", {"runs": runs, "seconds": args.seconds,
                                      "preset": args.preset})
     print(f"\nwrote {path}")

@@ -9,6 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from sim.camera import BODY_FROM_OPTICAL
 from sim.geometry import FloatArray, Pose, yaw_matrix
 from sim.open3d_any import o3c, o3d
+from sim.tsdf_slabs import mesh_in_slabs
 
 _CPU = o3c.Device("CPU:0")
 
@@ -86,15 +87,8 @@ class TsdfVolume:
         """Marching-cubes mesh of the fused surface: (V, 3) vertices and (F, 3) triangles."""
         if self.frames == 0:
             return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int32)
-        try:
-            mesh = self._grid.extract_triangle_mesh(self.config.weight_threshold)
-        except RuntimeError:
-            return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int32)
-        if "positions" not in mesh.vertex or "indices" not in mesh.triangle:
-            return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int32)
-        vertices = np.asarray(mesh.vertex.positions.numpy(), dtype=np.float64)
-        triangles = np.asarray(mesh.triangle.indices.numpy(), dtype=np.int32)
-        return vertices, triangles
+        # In slabs: one extraction of the whole grid needs 8 KiB of scratch per block.
+        return mesh_in_slabs(self._grid, self.config.voxel_size_m, self.config.weight_threshold)
 
     def sdf_at(self, points: npt.NDArray[np.floating]) -> tuple[
         npt.NDArray[np.float64], npt.NDArray[np.float32]
