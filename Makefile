@@ -60,18 +60,19 @@ demo-run: install
 TEST_JOBS ?= $(shell nproc)
 
 # Everything: lint, types and every test (the slow ones, the browser tests and the wheel's
-# install into a fresh environment included).
+# install into a fresh environment included). Tests are handed to the processes in chunks as they
+# free up; a module fixture is set up in each process that runs one of its file's tests.
 test: install test-system-deps
 	$(BIN)/ruff check .
 	$(BIN)/mypy
-	$(BIN)/pytest -n $(TEST_JOBS) --dist loadgroup
+	$(BIN)/pytest -n $(TEST_JOBS) --dist load
 
 # The inner loop, a few minutes: lint, types and the tests not marked `slow` (tests/conftest.py
 # marks the long ones of every folder). Needs no browser.
 test-fast: install
 	$(BIN)/ruff check .
 	$(BIN)/mypy
-	$(BIN)/pytest -n $(TEST_JOBS) --dist loadgroup -m "not slow"
+	$(BIN)/pytest -n $(TEST_JOBS) --dist load -m "not slow"
 
 benchmark: install benchmark-system-deps
 	$(BIN)/python benchmarks/sim_speed.py

@@ -64,16 +64,7 @@ def _is_slow(item: pytest.Item) -> bool:
     return callspec is not None and callspec.params.get("database_url") == "postgresql"
 
 
-# `make test` spreads the tests over the cores (`pytest -n N --dist loadgroup`); a group runs in
-# one process, in order. Every file is a group of its own, so that its module fixtures (a service
-# with finished jobs, say) start once.
-def xdist_group(item: pytest.Item) -> str:
-    return item.nodeid.split("::", 1)[0]
-
-
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
         if _is_slow(item):
             item.add_marker(pytest.mark.slow)
-        if config.pluginmanager.hasplugin("xdist"):
-            item.add_marker(pytest.mark.xdist_group(xdist_group(item)))
