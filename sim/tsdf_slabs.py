@@ -18,14 +18,14 @@ fall on the same position, which happens where the surface passes within roundin
 a plane where that could happen is not used as a boundary (`_plane_is_ambiguous`).
 `tests/sim/test_tsdf_slabs.py` compares with the whole-grid extraction.
 
-The slabs are meshed twice, first to size the result and then to fill it, so that one slab's
-mesh at a time is held beside the result; meshing takes about twice as long as one extraction
-of the whole grid (seconds, once, at the end of a run on the largest areas).
+The slabs' meshes are held until the last is made, in pages of their own; the result is then
+filled from them, each slab's pages returned to the system once copied.
 """
 
 from __future__ import annotations
 
 import itertools
+import mmap
 from collections.abc import Iterable, Iterator
 from typing import Any
 
@@ -80,21 +80,28 @@ def mesh_in_slabs(grid: Any, voxel_size: float, weight_threshold: float,
                      if hi != edges[-1] else None)
             yield vertices, triangles, below, above
 
-    # Two passes over the slabs (the mesh of a slab is the same set both times): the first
-    # sizes the result, the second fills it. Holding the slabs' meshes between the two instead
-    # would keep them resident beside the result (freed small arrays stay in the heap).
-    n_vertices = n_triangles = 0
-    for vertices, triangles in _joined(slabs()):
-        n_vertices += len(vertices)
-        n_triangles += len(triangles)
+    # The slabs' meshes are held in pages of their own until all are made; the result is then
+    # filled slab by slab, each slab's pages returned to the system once copied. The result's
+    # pages become resident as they are written, so the peak is about the larger of the two.
+    held = list(slabs())
+    n_vertices = sum(len(v) for v, _, _, _ in held) - sum(
+        len(_pair_equal_rows(low[low[:, 0] == plane], high[high[:, 0] == plane])[0])
+        for (low, _, _, plane), (high, _, _, _) in itertools.pairwise(held) if plane is not None)
     out_v = np.empty((n_vertices, 3), dtype=np.float64)
-    out_t = np.empty((n_triangles, 3), dtype=np.int32)
+    out_t = np.empty((sum(len(t) for _, t, _, _ in held), 3), dtype=np.int32)
     at_v = at_t = 0
-    for vertices, triangles in _joined(slabs()):
+    for vertices, triangles in _joined(_releasing(held)):
         out_v[at_v:at_v + len(vertices)] = vertices
         out_t[at_t:at_t + len(triangles)] = triangles
         at_v, at_t = at_v + len(vertices), at_t + len(triangles)
     return out_v, out_t
+
+
+def _releasing(held: list[Slab]) -> Iterator[Slab]:
+    """The slabs in order, each dropped from `held` as it is given."""
+    held.reverse()
+    while held:
+        yield held.pop()
 
 
 def _joined(slabs: Iterable[Slab]) -> Iterator[tuple[Vertices, Triangles]]:
@@ -156,13 +163,14 @@ def _plane_is_ambiguous(bx: int, keys: npt.NDArray[np.int32], tsdf: npt.NDArray[
     y0, z0 = yz.min(axis=0)
     ny, nz = (yz.max(axis=0) - (y0, z0) + 1) * resolution
     here, after, before = (np.full((ny, nz), np.nan, dtype=np.float32) for _ in range(3))
-    for layer, local, out in ((upper, 0, here), (upper, 1, after), (lower, resolution - 1,
-                                                                       before)):
-        for (yb, zb), row in zip(keys[layer, 1:].tolist(), rows[layer].tolist(), strict=True):
-            values = tsdf[row, :, :, local, 0].T  # (y, z)
-            weighed = np.greater(weight[row, :, :, local, 0].T, weight_threshold)
-            y, z = (yb - y0) * resolution, (zb - z0) * resolution
-            out[y:y + resolution, z:z + resolution] = np.where(weighed, values, np.nan)
+    local = np.arange(resolution)
+    for layer, x, out in ((upper, 0, here), (upper, 1, after), (lower, resolution - 1, before)):
+        values = tsdf[rows[layer], :, :, x, 0].transpose(0, 2, 1)  # (block, y, z)
+        weighed = np.greater(weight[rows[layer], :, :, x, 0].transpose(0, 2, 1),
+                             weight_threshold)
+        y = ((keys[layer, 1] - y0) * resolution)[:, None, None] + local[None, :, None]
+        z = ((keys[layer, 2] - z0) * resolution)[:, None, None] + local[None, None, :]
+        out[y, z] = np.where(weighed, values, np.nan)
     vs = np.float32(voxel_size)
     x_plane = np.float32(bx * resolution)
     gy = np.float32(y0 * resolution) + np.arange(ny, dtype=np.float32)
@@ -190,8 +198,8 @@ def _plane_is_ambiguous(bx: int, keys: npt.NDArray[np.int32], tsdf: npt.NDArray[
         crossing, ratio = edge(t_o, t_e)
         on_plane = crossing & (vs * (start + ratio) == vs * x_plane)
         found.append(np.column_stack([(vs * grid_y)[on_plane], (vs * grid_z)[on_plane]]))
-    points = np.concatenate(found)
-    return len(np.unique(points + np.float32(0.0), axis=0)) < len(points)
+    points = _plane_keys(np.concatenate(found))
+    return len(np.unique(points)) < len(points)
 
 
 def _sub_grid(voxel_size: float, keys: npt.NDArray[np.int32], rows: npt.NDArray[np.int64],
@@ -217,24 +225,49 @@ def _sub_grid(voxel_size: float, keys: npt.NDArray[np.int32], rows: npt.NDArray[
 
 
 def _extract(grid: Any, weight_threshold: float) -> tuple[Vertices, Triangles]:
-    empty = (np.zeros((0, 3), dtype=np.float32), np.zeros((0, 3), dtype=np.int32))
+    """Open3D's mesh of `grid`, copied into arrays of their own pages (`_own_pages`)."""
     try:
         mesh = grid.extract_triangle_mesh(weight_threshold)
     except RuntimeError:  # Open3D raises instead of returning an empty mesh
-        return empty
-    if "positions" not in mesh.vertex or "indices" not in mesh.triangle:
-        return empty
-    vertices = np.array(mesh.vertex.positions.numpy(), dtype=np.float32)
-    triangles = np.array(mesh.triangle.indices.numpy(), dtype=np.int32)
+        mesh = None
+    if mesh is None or "positions" not in mesh.vertex or "indices" not in mesh.triangle:
+        return np.zeros((0, 3), dtype=np.float32), np.zeros((0, 3), dtype=np.int32)
+    positions = mesh.vertex.positions.numpy()
+    indices = mesh.triangle.indices.numpy()
+    vertices = _own_pages(positions.shape, np.float32)
+    triangles = _own_pages(indices.shape, np.int32)
+    vertices[...] = positions
+    triangles[...] = indices
     return vertices, triangles
+
+
+def _own_pages(shape: tuple[int, ...], dtype: type[np.generic]) -> npt.NDArray[Any]:
+    """An array in an anonymous mapping of its own, unmapped when the array is dropped: a few
+    MiB freed on the heap stay resident, and the slabs' meshes are dropped one by one while
+    the result is being filled."""
+    nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
+    if nbytes == 0:
+        return np.zeros(shape, dtype=dtype)
+    return np.frombuffer(mmap.mmap(-1, nbytes), dtype=dtype).reshape(shape)
+
+
+def _plane_keys(yz: npt.NDArray[np.float32]) -> npt.NDArray[np.uint64]:
+    """One key per (N, 2) y, z position on a plane: the two float32s' bits (-0.0 as 0.0)."""
+    bits = (yz + np.float32(0.0)).view(np.uint32).astype(np.uint64)
+    return np.asarray((bits[:, 0] << np.uint64(32)) | bits[:, 1], dtype=np.uint64)
 
 
 def _pair_equal_rows(a: Vertices, b: Vertices) -> tuple[npt.NDArray[np.int64],
                                                         npt.NDArray[np.int64]]:
-    """Indices (i, j) pairing rows of `a` with equal rows of `b`, the k-th copy of a row in
-    `a` with the k-th copy in `b`."""
-    ka, kb = _occurrence_keys(a), _occurrence_keys(b)
-    both = np.concatenate([ka, kb])
+    """Indices (i, j) pairing vertices of `a` with equal vertices of `b`, all on one x plane.
+    On a boundary plane no two vertices of a slab coincide (`_plane_is_ambiguous`); should
+    some, the k-th copy in `a` is paired with the k-th in `b`."""
+    ka, kb = _plane_keys(a[:, 1:]), _plane_keys(b[:, 1:])
+    if len(np.unique(ka)) == len(ka) and len(np.unique(kb)) == len(kb):
+        _, i, j = np.intersect1d(ka, kb, assume_unique=True, return_indices=True)
+        return i.astype(np.int64), j.astype(np.int64)
+    ra, rb = _occurrence(ka), _occurrence(kb)
+    both = np.concatenate([np.column_stack([ka, ra]), np.column_stack([kb, rb])])
     _, inverse = np.unique(both, axis=0, return_inverse=True)
     inverse = inverse.reshape(-1)
     _, i, j = np.intersect1d(inverse[:len(ka)], inverse[len(ka):], assume_unique=True,
@@ -242,14 +275,13 @@ def _pair_equal_rows(a: Vertices, b: Vertices) -> tuple[npt.NDArray[np.int64],
     return i.astype(np.int64), j.astype(np.int64)
 
 
-def _occurrence_keys(rows: Vertices) -> npt.NDArray[np.int64]:
-    """(N, 4) keys: a row's bits (+0.0 for -0.0) and how many equal rows come before it."""
-    bits = (rows + np.float32(0.0)).view(np.uint32).astype(np.int64)
-    order = np.lexsort(bits.T[::-1])
-    ordered = bits[order]
-    starts = np.ones(len(rows), dtype=bool)
-    starts[1:] = np.any(ordered[1:] != ordered[:-1], axis=1)
-    first = np.maximum.accumulate(np.where(starts, np.arange(len(rows)), 0))
-    rank = np.empty(len(rows), dtype=np.int64)
-    rank[order] = np.arange(len(rows)) - first
-    return np.column_stack([bits, rank])
+def _occurrence(keys: npt.NDArray[np.uint64]) -> npt.NDArray[np.uint64]:
+    """How many equal keys come before each key."""
+    order = np.argsort(keys, kind="stable")
+    ordered = keys[order]
+    starts = np.ones(len(keys), dtype=bool)
+    starts[1:] = ordered[1:] != ordered[:-1]
+    first = np.maximum.accumulate(np.where(starts, np.arange(len(keys)), 0))
+    rank = np.empty(len(keys), dtype=np.uint64)
+    rank[order] = np.arange(len(keys)) - first
+    return rank

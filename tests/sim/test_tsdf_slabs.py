@@ -12,7 +12,13 @@ from sim.camera import DepthCamera
 from sim.geometry import Pose
 from sim.open3d_any import o3c, o3d
 from sim.tsdf import TsdfConfig, TsdfVolume
-from sim.tsdf_slabs import _extract, _plane_is_ambiguous, _slab_starts, mesh_in_slabs
+from sim.tsdf_slabs import (
+    _extract,
+    _pair_equal_rows,
+    _plane_is_ambiguous,
+    _slab_starts,
+    mesh_in_slabs,
+)
 
 VOXEL = 0.05
 RES = 8
@@ -168,3 +174,13 @@ def test_a_plane_whose_voxel_sits_on_the_surface_between_two_crossings_is_ambigu
     assert not _plane_is_ambiguous(2, got_keys, *views, rows, VOXEL, THRESHOLD)
     assert _slab_starts(got_keys, *views, rows, 1, VOXEL, THRESHOLD) == [0, 2]
     _assert_same_mesh(grid, slab_blocks=1)
+
+
+def test_vertices_on_a_plane_pair_one_for_one_even_when_some_coincide() -> None:
+    a = np.array([[1, 2, 3], [1, 5, 6], [1, 2, 3], [1, 0, -0.0]], dtype=np.float32)
+    b = np.array([[1, 2, 3], [1, 9, 9], [1, 0, 0], [1, 5, 6]], dtype=np.float32)
+    i, j = _pair_equal_rows(a, b)
+    assert sorted(zip(i.tolist(), j.tolist(), strict=True)) in ([(0, 0), (1, 3), (3, 2)],
+                                                               [(1, 3), (2, 0), (3, 2)])
+    i, j = _pair_equal_rows(a[[1, 3]], b)
+    assert sorted(zip(i.tolist(), j.tolist(), strict=True)) == [(0, 3), (1, 2)]
