@@ -37,18 +37,16 @@ def _peak_rss_mib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+def _status_mib(field: str) -> float:
+    """A memory field of /proc/self/status (VmRSS: resident now, VmHWM: its high-water mark)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith(f"{field}:"):
+            return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
 def _vm_rss_mib() -> float:
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024.0
-    return float("nan")
-
-
-def _vm_hwm_mib() -> float:
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1]) / 1024.0
-    return float("nan")
+    return _status_mib("VmRSS")
 
 
 def _watch_reconstruction(stages: dict[str, Any]) -> None:
@@ -62,7 +60,7 @@ def _watch_reconstruction(stages: dict[str, Any]) -> None:
         Path("/proc/self/clear_refs").write_text("5")  # resets VmHWM to the resident set
         t0 = time.perf_counter()
         out = mesh(self)
-        stages["reconstruction"] = (before, _vm_hwm_mib(), time.perf_counter() - t0)
+        stages["reconstruction"] = (before, _status_mib("VmHWM"), time.perf_counter() - t0)
         return out
 
     TsdfVolume.mesh = watched  # type: ignore[method-assign]

@@ -9,9 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from sim.camera import BODY_FROM_OPTICAL
 from sim.geometry import FloatArray, Pose, yaw_matrix
 from sim.open3d_any import o3c, o3d
-from sim.tsdf_slabs import mesh_in_slabs
-
-_CPU = o3c.Device("CPU:0")
+from sim.tsdf_slabs import block_grid, mesh_in_slabs
 
 
 class TsdfConfig(BaseModel):
@@ -33,15 +31,8 @@ class TsdfVolume:
         self.config = config
         self._intrinsic = o3c.Tensor(np.asarray(intrinsic, dtype=np.float64))
         self._max_range = float(max_range_m)
-        self._grid = o3d.t.geometry.VoxelBlockGrid(
-            attr_names=("tsdf", "weight"),
-            attr_dtypes=(o3c.float32, o3c.float32),
-            attr_channels=((1), (1)),
-            voxel_size=config.voxel_size_m,
-            block_resolution=config.block_resolution,
-            block_count=config.initial_block_count,
-            device=_CPU,
-        )
+        self._grid = block_grid(config.voxel_size_m, config.block_resolution,
+                                config.initial_block_count)
         self.frames = 0
 
     @staticmethod

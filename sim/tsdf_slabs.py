@@ -34,7 +34,7 @@ import numpy.typing as npt
 
 from sim.open3d_any import o3c, o3d
 
-__all__ = ["SLAB_BLOCKS", "mesh_in_slabs"]
+__all__ = ["SLAB_BLOCKS", "block_grid", "mesh_in_slabs"]
 
 _CPU = o3c.Device("CPU:0")
 
@@ -45,8 +45,16 @@ SLAB_BLOCKS = 1024
 Vertices = npt.NDArray[np.float32]
 Triangles = npt.NDArray[np.int32]
 Points = npt.NDArray[np.float64]
-# A slab's mesh and the x of its lower and upper shared planes (None at the grid's ends).
-Slab = tuple[Vertices, Triangles, np.float32 | None, np.float32 | None]
+Slab = tuple[Vertices, Triangles]
+
+
+def block_grid(voxel_size: float, resolution: int, block_count: int) -> Any:
+    """An empty CPU `VoxelBlockGrid` with float32 "tsdf" and "weight" per voxel."""
+    return o3d.t.geometry.VoxelBlockGrid(
+        attr_names=("tsdf", "weight"), attr_dtypes=(o3c.float32, o3c.float32),
+        attr_channels=((1), (1)), voxel_size=voxel_size, block_resolution=resolution,
+        block_count=block_count, device=_CPU,
+    )
 
 
 def mesh_in_slabs(grid: Any, voxel_size: float, weight_threshold: float,
@@ -67,34 +75,39 @@ def mesh_in_slabs(grid: Any, voxel_size: float, weight_threshold: float,
     edges = [*starts, int(keys[:, 0].max()) + 1]
     resolution = tsdf.shape[1]
 
-    def slabs() -> Iterator[Slab]:
-        """Each slab's mesh, with the x of its lower and upper shared planes (None at the
-        grid's ends): where Open3D puts a vertex of a plane voxel's y or z edge."""
-        for i, (lo, hi) in enumerate(itertools.pairwise(edges)):
-            inside = (keys[:, 0] >= lo) & (keys[:, 0] < hi)
-            sub = _sub_grid(voxel_size, keys, rows, inside, keys[:, 0] == hi, tsdf, weight)
-            vertices, triangles = _extract(sub, weight_threshold)
-            del sub
-            below = np.float32(voxel_size) * np.float32(lo * resolution) if i > 0 else None
-            above = (np.float32(voxel_size) * np.float32(hi * resolution)
-                     if hi != edges[-1] else None)
-            yield vertices, triangles, below, above
+    def slab(lo: int, hi: int) -> Slab:
+        inside = (keys[:, 0] >= lo) & (keys[:, 0] < hi)
+        sub = _sub_grid(voxel_size, keys, rows, inside, keys[:, 0] == hi, tsdf, weight)
+        return _extract(sub, weight_threshold)
 
     # The slabs' meshes are held in pages of their own until all are made; the result is then
     # filled slab by slab, each slab's pages returned to the system once copied. The result's
     # pages become resident as they are written, so the peak is about the larger of the two.
-    held = list(slabs())
-    n_vertices = sum(len(v) for v, _, _, _ in held) - sum(
-        len(_pair_equal_rows(low[low[:, 0] == plane], high[high[:, 0] == plane])[0])
-        for (low, _, _, plane), (high, _, _, _) in itertools.pairwise(held) if plane is not None)
-    out_v = np.empty((n_vertices, 3), dtype=np.float64)
-    out_t = np.empty((sum(len(t) for _, t, _, _ in held), 3), dtype=np.int32)
+    held = [slab(lo, hi) for lo, hi in itertools.pairwise(edges)]
+    # Where Open3D puts a vertex of a plane voxel's y or z edge: voxel_size * (x + 0) in float32.
+    planes = [np.float32(voxel_size) * np.float32(b * resolution) for b in edges[1:-1]]
+    shared = [_shared_vertices(low, high, plane)
+              for ((low, _), (high, _)), plane in zip(itertools.pairwise(held), planes,
+                                                      strict=True)]
+    out_v = np.empty((sum(len(v) for v, _ in held) - sum(len(lo) for lo, _ in shared), 3),
+                     dtype=np.float64)
+    out_t = np.empty((sum(len(t) for _, t in held), 3), dtype=np.int32)
     at_v = at_t = 0
-    for vertices, triangles in _joined(_releasing(held)):
+    for vertices, triangles in _joined(_releasing(held), shared):
         out_v[at_v:at_v + len(vertices)] = vertices
         out_t[at_t:at_t + len(triangles)] = triangles
         at_v, at_t = at_v + len(vertices), at_t + len(triangles)
     return out_v, out_t
+
+
+def _shared_vertices(low: Vertices, high: Vertices, plane: np.float32) -> tuple[
+        npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Indices into `low` and `high` (two neighbouring slabs' vertices) of the vertices both
+    made on the plane x = `plane` between them, paired one for one."""
+    on_low = np.flatnonzero(low[:, 0] == plane)
+    on_high = np.flatnonzero(high[:, 0] == plane)
+    i, j = _pair_equal_rows(low[on_low], high[on_high])
+    return on_low[i], on_high[j]
 
 
 def _releasing(held: list[Slab]) -> Iterator[Slab]:
@@ -104,25 +117,23 @@ def _releasing(held: list[Slab]) -> Iterator[Slab]:
         yield held.pop()
 
 
-def _joined(slabs: Iterable[Slab]) -> Iterator[tuple[Vertices, Triangles]]:
-    """The slabs' meshes as consecutive parts of one mesh: a slab's vertices on its lower
-    plane that equal (one for one) vertices the slab below left on that plane are dropped,
-    and its triangles are given in the whole mesh's vertex indices."""
-    shared_at: Vertices = np.zeros((0, 3), dtype=np.float32)  # the slab below's, on the plane
-    shared_index = np.zeros(0, dtype=np.int64)  # and their indices in the whole mesh
+def _joined(slabs: Iterable[Slab], shared: list[tuple[npt.NDArray[np.int64],
+                                                      npt.NDArray[np.int64]]],
+            ) -> Iterator[tuple[Vertices, Triangles]]:
+    """The slabs' meshes as consecutive parts of one mesh: a slab's vertices that `shared`
+    pairs with the slab below's are dropped, and its triangles are given in the whole mesh's
+    vertex indices."""
+    below_index = np.zeros(0, dtype=np.int64)  # whole-mesh indices of the slab below's shared
     given = 0  # vertices given so far
-    for vertices, triangles, below, above in slabs:
+    for k, (vertices, triangles) in enumerate(slabs):
         index = np.full(len(vertices), -1, dtype=np.int64)
-        if below is not None and len(shared_at):
-            mine = np.flatnonzero(vertices[:, 0] == below)
-            theirs, ours = _pair_equal_rows(shared_at, vertices[mine])
-            index[mine[ours]] = shared_index[theirs]
+        if k > 0:
+            index[shared[k - 1][1]] = below_index
         own = index < 0
         n_own = int(np.count_nonzero(own))
         index[own] = given + np.arange(n_own)
-        if above is not None:
-            on_plane = np.flatnonzero(vertices[:, 0] == above)
-            shared_at, shared_index = vertices[on_plane], index[on_plane]
+        if k < len(shared):
+            below_index = index[shared[k][0]]
         given += n_own
         yield vertices[own], index[triangles].astype(np.int32)
 
@@ -208,11 +219,7 @@ def _sub_grid(voxel_size: float, keys: npt.NDArray[np.int32], rows: npt.NDArray[
     """A grid of the blocks `inside` and, weighted on their first x plane only, `layer`."""
     picked = np.concatenate([np.flatnonzero(inside), np.flatnonzero(layer)])
     resolution = tsdf.shape[1]
-    sub = o3d.t.geometry.VoxelBlockGrid(
-        attr_names=("tsdf", "weight"), attr_dtypes=(o3c.float32, o3c.float32),
-        attr_channels=((1), (1)), voxel_size=voxel_size, block_resolution=resolution,
-        block_count=max(len(picked), 1), device=_CPU,
-    )
+    sub = block_grid(voxel_size, resolution, max(len(picked), 1))
     buf, _ = sub.hashmap().activate(o3c.Tensor(np.ascontiguousarray(keys[picked])))
     target = buf.numpy().astype(np.int64)
     sub_tsdf = sub.attribute("tsdf").numpy()

@@ -10,13 +10,14 @@ import pytest
 
 from sim.camera import DepthCamera
 from sim.geometry import Pose
-from sim.open3d_any import o3c, o3d
+from sim.open3d_any import o3c
 from sim.tsdf import TsdfConfig, TsdfVolume
 from sim.tsdf_slabs import (
     _extract,
     _pair_equal_rows,
     _plane_is_ambiguous,
     _slab_starts,
+    block_grid,
     mesh_in_slabs,
 )
 
@@ -27,10 +28,7 @@ THRESHOLD = 1.0
 
 def _grid(keys: npt.NDArray[np.int32], tsdf: npt.NDArray[np.float32],
           weight: npt.NDArray[np.float32]) -> object:
-    grid = o3d.t.geometry.VoxelBlockGrid(
-        attr_names=("tsdf", "weight"), attr_dtypes=(o3c.float32, o3c.float32),
-        attr_channels=((1), (1)), voxel_size=VOXEL, block_resolution=RES,
-        block_count=max(len(keys), 100), device=o3c.Device("CPU:0"))
+    grid = block_grid(VOXEL, RES, max(len(keys), 100))
     buf, _ = grid.hashmap().activate(o3c.Tensor(np.ascontiguousarray(keys)))
     rows = buf.numpy().astype(np.int64)
     grid.attribute("tsdf").numpy()[rows] = tsdf
