@@ -20,8 +20,13 @@ and how many returns that mean holds. Once a voxel holds returns from two or mor
 passing through it counts as a miss only if it passes within `OccupancyConfig.miss_radius_m` of
 that mean and runs on past it by more than the radius plus twice the range noise at the ray's
 length (`OccupancyConfig.range_noise`); rays that pass elsewhere through the voxel, or return
-within that margin of the mean, leave it alone. A miss that drives the voxel down to
-`clamp_min` forgets its returns. Why:
+within that margin of the mean, leave it alone. A voxel whose returns become held while it is
+FREE turns OCCUPIED (log-odds `occupied_threshold + log_odds_hit`, as after a lone hit): the
+misses that brought it down came from rays that the rule it now follows counts as passing
+beside its surface. Without this, a 2 cm rod in a 0.2 m voxel, seen once from 4 m, cleared by
+the next frames' rays beside it and seen again, stayed FREE for good: no ray beside it counted
+any more, and one more hit did not lift it over the threshold. A miss that drives the voxel
+down to `clamp_min` forgets its returns. Why:
 
 - Thin surfaces. A rail, wire or plate edge fills a few centimetres of a 10-20 cm voxel. In
   OctoMap's model every ray through the rest of the voxel is a miss: seen from 4-5 m, where rays

@@ -205,8 +205,10 @@ def integrate_rays(
     mean and, if it has a return, runs on past that point by more than `miss_radius` plus
     `noise_sigmas` standard deviations of the range noise at its length, counts as a miss; rays
     passing elsewhere through the voxel leave it alone (the model and its reasons are
-    `sim.occupancy`'s). A miss that brings a voxel to `l_min` forgets its returns. Each batch
-    adds one return to the mean of each voxel rays returned in (that of the first such ray).
+    `sim.occupancy`'s). A voxel whose returns become held while it is FREE (misses of rays
+    passing beside a lone return brought it down) turns OCCUPIED, at `threshold + l_hit`. A miss
+    that brings a voxel to `l_min` forgets its returns. Each batch adds one return to the mean
+    of each voxel rays returned in (that of the first such ray).
     Log-odds are clamped to [l_min, l_max]. Rays with a non-finite endpoint are skipped; parts of
     rays outside the grid are skipped; the origin may lie outside.
 
@@ -363,7 +365,16 @@ def integrate_rays(
                     qx = px + math.floor((qx - px) * w + 0.5)
                     qy = py + math.floor((qy - py) * w + 0.5)
                     qz = pz + math.floor((qz - pz) * w + 0.5)
-                words[2 * v + 1] = (n << _COUNT_SHIFT) | (qz << 16) | (qy << 8) | qx
+                word = (n << _COUNT_SHIFT) | (qz << 16) | (qy << 8) | qx
+                words[2 * v + 1] = word
+                was_held = returns != SETTLED and returns >= protected
+                if word >= protected and not was_held and flat_l[v] <= threshold:
+                    # Its returns are held from now on, so the misses that rays passing beside
+                    # them dealt before no longer count: it is occupied, as after a lone hit.
+                    flat_l[v] = np.float32(min(threshold + l_hit, l_max))
+                    flat_s[v] = _OCCUPIED
+                    i, j, k = _unflatten(v, ny, nz)
+                    _grow_box(changed, i, j, k)
         # A DDA path is monotone on every axis, so the first and last of any of its voxels
         # bound all of them.
         _grow_box(touched, fi, fj, fk)

@@ -195,9 +195,10 @@ def test_log_odds_are_clamped(grid: OccupancyMap) -> None:
     cfg = grid.config
     assert grid.log_odds[5, 0, 0] == np.float32(cfg.clamp_max)
     assert grid.log_odds[2, 0, 0] == np.float32(cfg.clamp_min)
-    # From the lower clamp, three hits make a free voxel occupied again.
+    # At the lower clamp the voxel forgot its returns; returns from two frames hold it, so the
+    # second hit makes it occupied again.
     far = grid.index_to_world([2, 0, 0])
-    for expected in (VoxelState.FREE, VoxelState.FREE, VoxelState.OCCUPIED):
+    for expected in (VoxelState.FREE, VoxelState.OCCUPIED, VoxelState.OCCUPIED):
         grid.integrate(origin, far[None], [True])
         assert grid.state[2, 0, 0] == expected
 
@@ -418,6 +419,35 @@ def test_a_voxel_with_returns_from_one_frame_takes_every_miss() -> None:
     assert m.log_odds[idx] == pytest.approx(m.config.log_odds_hit + 3 * m.config.log_odds_miss)
 
 
+def test_a_free_voxel_whose_returns_become_held_is_occupied() -> None:
+    """A thin part seen in one frame, cleared by rays passing beside it, then seen again: its
+    two frames of returns hold it, so the misses dealt before no longer count and it is
+    occupied, as after a lone hit (it stayed FREE and held before: no miss could bring it back,
+    no pass-by ray could clear it, and the map kept it free while holding a surface)."""
+    m = line_map()
+    cfg = m.config
+    p = np.array([2.52, 1.03, 1.04])
+    idx = (25, 10, 10)
+    m.integrate(p - 2.0 * X, [p], [True])
+    beside = np.array([p[0] + 0.06, 0.05, p[2]])
+    for _ in range(6):
+        m.integrate(beside, [[p[0] + 0.06, 1.95, p[2]]], [True])
+    assert m.state[idx] == VoxelState.FREE
+    assert m.log_odds[idx] == pytest.approx(cfg.log_odds_hit + 6 * cfg.log_odds_miss)
+    box = m.subscribe()
+    m.integrate(p - 2.0 * X, [p + 0.002 * Y], [True])
+    assert m.returns([idx])[1][0] == 2
+    assert m.state[idx] == VoxelState.OCCUPIED
+    assert m.log_odds[idx] == pytest.approx(cfg.occupied_threshold + cfg.log_odds_hit)
+    changed = box.take()
+    assert changed is not None
+    assert all(lo <= i < hi for lo, i, hi in zip(changed.lo, idx, changed.hi, strict=True))
+    # Held now: rays passing beside it leave it occupied.
+    for _ in range(4):
+        m.integrate(beside, [[p[0] + 0.06, 1.95, p[2]]], [True])
+    assert m.state[idx] == VoxelState.OCCUPIED
+
+
 def test_returns_within_the_range_noise_beyond_the_mean_agree_with_it() -> None:
     """A ray through the mean that returns just beyond it (range noise of the same surface) is
     no miss; one that runs on well past it is. At 3 m the margin is 1 cm plus twice sigma(3 m),
@@ -465,10 +495,10 @@ def test_a_voxel_driven_to_the_floor_forgets_its_returns() -> None:
 
 def reference_integrate(ref: dict[str, npt.NDArray[np.float64]], m: OccupancyMap,
                         origin: npt.NDArray[np.float64], ends: npt.NDArray[np.float64],
-                        hit: npt.NDArray[np.bool_]) -> None:
+                        hit: npt.NDArray[np.bool_], raised: list[int]) -> None:
     """The update rule of `sim.occupancy`, voxel by voxel over `reference_voxels` paths:
     `ref` holds "log_odds" (nx, ny, nz), "mean" (nx, ny, nz, 3) in 1/256ths of the voxel and
-    "count" (nx, ny, nz)."""
+    "count" (nx, ny, nz); `raised[0]` counts the FREE voxels whose returns became held."""
     cfg, vs = m.config, m.voxel_size
     lo, mean, count = ref["log_odds"], ref["mean"], ref["count"]
     in_grid = [m.in_bounds(m.world_to_index(e)) and h for e, h in zip(ends, hit, strict=True)]
@@ -509,6 +539,9 @@ def reference_integrate(ref: dict[str, npt.NDArray[np.float64]], m: OccupancyMap
                 q = np.minimum(np.floor((b - np.floor(b)) * 256.0), 255.0)
                 n = min(count[v] + 1, 16)
                 mean[v] = q if n == 1 else mean[v] + np.floor((q - mean[v]) / n + 0.5)
+                if count[v] < 2 <= n and lo[v] <= cfg.occupied_threshold:
+                    lo[v] = np.float32(cfg.occupied_threshold + cfg.log_odds_hit)
+                    raised[0] += 1
                 count[v] = n
 
 
@@ -523,6 +556,7 @@ def test_the_kernel_matches_a_reference_of_the_rule_on_random_frames() -> None:
     size = np.array(m.shape) * VOXEL
     surface = m.origin + rng.uniform(0.1, size - 0.1, size=(12, 3))
     protected_misses = 0
+    raised = [0]
     for _ in range(60):
         origin = m.origin + rng.uniform(-0.3, size + 0.3)
         n = int(rng.integers(5, 60))
@@ -532,7 +566,7 @@ def test_the_kernel_matches_a_reference_of_the_rule_on_random_frames() -> None:
         ends = np.where(hit[:, None], ends, free_ends)
         before = ref["log_odds"].copy()
         m.integrate(origin, ends, hit)
-        reference_integrate(ref, m, origin, ends, hit)
+        reference_integrate(ref, m, origin, ends, hit, raised)
         protected_misses += int(np.count_nonzero((ref["log_odds"] < before) & (ref["count"] >= 2)))
         np.testing.assert_array_equal(m.log_odds, ref["log_odds"].astype(np.float32))
         idx = np.argwhere(np.ones(m.shape, dtype=bool))
@@ -546,4 +580,5 @@ def test_the_kernel_matches_a_reference_of_the_rule_on_random_frames() -> None:
                                       m.log_odds[known] > cfg.occupied_threshold)
     # Both branches of the rule were exercised.
     assert protected_misses > 0
+    assert raised[0] > 0
     assert np.count_nonzero(ref["count"] >= 2) > 5
