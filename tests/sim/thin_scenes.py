@@ -1,5 +1,8 @@
 """Test scenes with surfaces thinner than a voxel, and scripted camera passes through them.
 
+`rod_hall()` hangs WAREHOUSE's 2 cm lamp rods in a hall of 0.2 m voxels; `flyby_pass` flies
+past one of them.
+
 `thin_room()` is a 10 x 12 x 3 m room (0.1 m voxels) split by a wall with a 1.0 m and a 0.8 m
 door; in front of the wall stand 5 cm rails, 2 cm wires and 4 cm plates at several angles, one of
 them edge-on to the camera at its height. Every large surface (floor, ceiling, walls, door jambs)
@@ -228,6 +231,59 @@ def door_pass(door: Door) -> list[Pose]:
     poses += _line((x, WALL_NEAR_Y - 1.0, z), (x, WALL_NEAR_Y - 1.0, z), north, 10,
                    sweep_rad=0.25)
     return poses
+
+
+# The rod hall: lamp rods as WAREHOUSE hangs its lamps (`areas/warehouse.py`: 2 cm across, six
+# sides, 1 m long) in 0.2 m voxels, where a rod fills a tenth of its voxels' width.
+ROD_VOXEL = 0.2
+ROD_RADIUS = 0.01
+ROD_Z = (1.5, 2.5)
+RODS_XY = ((4.5, 4.5), (7.5, 4.5), (4.5, 7.5), (7.5, 7.5))
+FLYBY_Z = 2.0
+
+
+def rod_hall() -> Area:
+    """A 12 x 12 x 4 m hall (0.2 m voxels) with four hanging rods, each above a lamp shade."""
+    size = np.array([12.0, 12.0, 4.0])
+    lo, hi = -0.3 * np.ones(3), size + 0.3
+    shell = boxes(
+        [[lo[0], lo[1], lo[2]], [lo[0], lo[1], 3.9], [lo[0], lo[1], lo[2]],
+         [11.9, lo[1], lo[2]], [lo[0], lo[1], lo[2]], [lo[0], 11.9, lo[2]]],
+        [[hi[0], hi[1], 0.1], [hi[0], hi[1], hi[2]], [0.1, hi[1], hi[2]],
+         [hi[0], hi[1], hi[2]], [hi[0], 0.1, hi[2]], [hi[0], hi[1], hi[2]]],
+    )
+    rods = cylinders([(x, y, ROD_Z[0]) for x, y in RODS_XY],
+                     [(x, y, ROD_Z[1]) for x, y in RODS_XY], ROD_RADIUS, 6)
+    shades = boxes([(x - 0.3, y - 0.3, ROD_Z[0] - 0.35) for x, y in RODS_XY],
+                   [(x + 0.3, y + 0.3, ROD_Z[0]) for x, y in RODS_XY])
+    mesh = concat([shell, rods, shades])
+    return Area(
+        name="rod-hall",
+        vertices=np.ascontiguousarray(mesh.vertices, dtype=np.float64),
+        triangles=np.ascontiguousarray(mesh.triangles, dtype=np.int32),
+        bounds_min=np.zeros(3), bounds_max=size,
+        start=StartPose(position=np.array([1.0, 1.0, FLYBY_Z]), yaw=0.0),
+        plateau_s=60.0, voxel_size=ROD_VOXEL,
+        info=AreaInfo(title="Rod hall", rooms=1, levels=1, complexity="test", indoor=True),
+    )
+
+
+def rod_voxels(area: Area, x: float, y: float) -> IndexArray:
+    """(K, 3) the voxels a rod's axis passes through."""
+    zs = np.arange(ROD_Z[0] + 0.01, ROD_Z[1], 0.02)
+    points = np.stack([np.full_like(zs, x), np.full_like(zs, y), zs], axis=1)
+    idx = np.floor((points - area.bounds_min) / area.voxel_size).astype(np.int64)
+    return np.unique(idx, axis=0)
+
+
+def flyby_pass(rod: tuple[float, float], heading: float, lateral_m: float) -> list[Pose]:
+    """Past a rod at 0.3 m per fused frame (1.5 m/s at 5 Hz), looking along the motion, its
+    closest approach `lateral_m` from the rod's axis: from 4.5 m before that point to 1.5 m
+    after."""
+    along = np.array([math.cos(heading), math.sin(heading), 0.0])
+    side = np.array([-along[1], along[0], 0.0])
+    closest = np.array([rod[0], rod[1], FLYBY_Z]) + lateral_m * side
+    return [Pose(closest + s * along, heading) for s in np.arange(-4.5, 1.5 + 1e-9, 0.3)]
 
 
 def new_map(area: Area, config: OccupancyConfig | None = None) -> OccupancyMap:
