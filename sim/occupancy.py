@@ -11,40 +11,46 @@ The update is OctoMap's (Hornung et al., Autonomous Robots 34(3), 2013; `Occupan
 clamped log-odds, a hit for the voxel a ray returns in, a miss for every other voxel it passes
 through; within one depth frame each voxel is updated once, and a voxel some ray returned in
 takes the hit whatever other rays passed through it (OctoMap's scan update prefers occupied
-cells over free ones). One rule is added, for surfaces thinner than a voxel:
+cells over free ones). Two rules are added, for surfaces thinner than a voxel:
 
-**A seen surface is taken away only by a ray through where it was seen.** Every voxel also keeps
-where in it rays have returned: the running mean of one return point per frame (the first ray's
-of the frame to return there), to 1/256 of the voxel per axis, over the last 16 or so frames,
-and how many returns that mean holds. Once a voxel holds returns from two or more frames, a ray
-passing through it counts as a miss only if it passes within `OccupancyConfig.miss_radius_m` of
-that mean and runs on past it by more than the radius plus twice the range noise at the ray's
-length (`OccupancyConfig.range_noise`); rays that pass elsewhere through the voxel, or return
-within that margin of the mean, leave it alone. A voxel whose returns become held while it is
-FREE turns OCCUPIED (log-odds `occupied_threshold + log_odds_hit`, as after a lone hit): the
-misses that brought it down came from rays that the rule it now follows counts as passing
-beside its surface. Without this, a 2 cm rod in a 0.2 m voxel, seen once from 4 m, cleared by
-the next frames' rays beside it and seen again, stayed FREE for good: no ray beside it counted
-any more, and one more hit did not lift it over the threshold. A miss that drives the voxel
-down to `clamp_min` forgets its returns. Why:
+**A return is believed until a ray contradicts it.** Every voxel also keeps where in it rays
+have returned: the running mean of one return point per frame (the first ray's of the frame to
+return there), to 1/256 of the voxel per axis, over the last 16 or so frames, and how many
+returns that mean holds. A hit leaves the voxel OCCUPIED: when the misses of earlier rays had
+brought it lower, its log-odds becomes `occupied_threshold + log_odds_hit`, as after a lone hit.
+A miss is then counted only from a ray that says something about the returns:
 
-- Thin surfaces. A rail, wire or plate edge fills a few centimetres of a 10-20 cm voxel. In
+- returns from two or more frames (a surface seen): a ray passing within
+  `OccupancyConfig.miss_radius_m` of their mean and running on past it by more than the radius
+  plus twice the range noise at the ray's length (`OccupancyConfig.range_noise`); rays that
+  pass elsewhere through the voxel, or return within that margin of the mean, leave it alone;
+- returns from one frame: a ray passing within the radius of the return, or one returning on a
+  surface just behind it (within a voxel's diagonal plus that margin), of which the return may
+  be range noise; rays passing beside it and running on leave it alone;
+- no returns: every ray through it, as in OctoMap.
+
+A miss that drives the voxel down to `clamp_min` forgets its returns. Why:
+
+- Thin surfaces. A rail, wire, rod or plate edge fills a few centimetres of a 10-20 cm voxel. In
   OctoMap's model every ray through the rest of the voxel is a miss: seen from 4-5 m, where rays
   are about 10 cm apart and more of them pass a 5 cm rail's voxel than hit it, the voxel loses
   more than it gains and is cleared within about nine frames (`docs/notes/2026-11-safety-stops.md`).
-  A ray passing beside the rail says nothing about the rail. The radius, 1 cm, is half the width
-  of the thinnest parts the areas hold (the 2 cm flanges of steel columns, 2.4 cm handles): a
-  ray that close to a point on the middle of such a part hits it.
+  A ray passing beside the rail says nothing about the rail. Nor do the misses dealt before the
+  first hit: rays passing a 2 cm rod in a 0.2 m voxel free the voxel before one hits the rod,
+  and summed with them the hit left it FREE; planners flew into such rods on WAREHOUSE once the
+  camera no longer faced them (`docs/notes/2026-12-warehouse-rod.md`). The radius, 1 cm, is half
+  the width of the thinnest parts the areas hold (the 2 cm flanges of steel columns, lamp rods,
+  2.4 cm handles): a ray that close to a point on the middle of such a part hits it.
 - Range noise. Depth noise puts a thin surface's own returns up to a few centimetres behind it
   (sigma 4 cm at 5 m, `sim.noise`), often in the next voxel; their rays pass the surface's
   returns and must not count against them.
-- Speckle. A single return proves nothing: a voxel with a return from one frame only (a
-  depth-noise outlier in free space, in front of a wall say) takes every miss, as in OctoMap,
-  and the next frames' rays clear it as before. A voxel that collected returns in two or more
-  frames is cleared by rays that pass within the radius of their mean: within a few frames when
-  seen from a metre or two, slowly when seen only from 4-5 m, where rays are 8-10 cm apart and
-  a wall's range noise (3-4 cm) puts returns in the voxel in front of it
-  (`docs/notes/2026-12-map-fidelity.md` has the measurements).
+- Speckle. Range noise also puts a wall's returns in the voxel in front of it. Such a return
+  lies within the noise of the wall behind it, so the rays of the next frames that return on
+  the wall through that voxel clear it, as in OctoMap. Returns that collected in two or more
+  frames are cleared only by rays through their mean: within a few frames when seen from a
+  metre or two, slowly when seen only from 4-5 m, where rays are 8-10 cm apart and a wall's
+  range noise is 3-4 cm (`docs/notes/2026-12-map-fidelity.md` and
+  `docs/notes/2026-12-warehouse-rod.md` have the measurements).
 
 The rule is a hard-threshold form of the miss update of NDT occupancy maps (Saarinen et al.,
 IJRR 32(14), 2013), which weighs the miss of a ray through a cell by how likely the ray passes
@@ -95,16 +101,17 @@ class OccupancyConfig(BaseModel):
     """Log-odds sensor model (see the module docstring for the surface-evidence rule).
 
     Attributes:
-        log_odds_hit: added to the voxel holding a ray's return.
+        log_odds_hit: added to the voxel holding a ray's return (which is then at least
+            `occupied_threshold + log_odds_hit`).
         log_odds_miss: added to every voxel a ray passes through before its end (a voxel holding
-            returns: only by rays through where they lie).
+            returns: only by rays that contradict them, see the module docstring).
         clamp_min: lower bound of the log-odds, so free space can turn occupied again quickly.
         clamp_max: upper bound of the log-odds.
         occupied_threshold: a known voxel is OCCUPIED when its log-odds is > this, else FREE.
         clear_max_range: rays without a return (hit False) carve free space up to their end,
             end voxel included; when False such rays are ignored.
-        miss_radius_m: a voxel holding returns from two or more frames takes a miss only from a
-            ray passing within this distance of their mean.
+        miss_radius_m: a voxel holding returns takes a miss from a ray passing within this
+            distance of their mean (from one frame: also from a ray returning just behind it).
         range_noise: the range noise the map allows for beyond a voxel's returns (twice its
             sigma at the ray's length); the benchmark camera's by default. Disabled: none.
     """

@@ -175,6 +175,9 @@ SETTLED = 1 << 31
 _COUNT_SHIFT = 24
 _COUNT_MASK = 31
 _POS_STEPS = 256.0
+# A voxel's diagonal in voxels: how far behind a lone return a surface may lie whose range noise
+# it is.
+_DIAGONAL = math.sqrt(3.0)
 # 1 / n for the running mean over n returns.
 _INVERSE = np.array([0.0] + [1.0 / n for n in range(1, _COUNT_MASK + 1)])
 
@@ -199,16 +202,16 @@ def integrate_rays(
     """Update the grid with a batch of rays sharing one origin (one depth frame).
 
     Each voxel is updated at most once per batch, and hits win (as OctoMap does): a voxel in
-    which any ray ends on a surface gets `l_hit`. Every other in-grid voxel that some ray passes
-    through, or ends in without a return, gets `l_miss` - unless the voxel holds returns from
-    at least `min_returns` batches: then only a ray that passes within `miss_radius` of their
-    mean and, if it has a return, runs on past that point by more than `miss_radius` plus
-    `noise_sigmas` standard deviations of the range noise at its length, counts as a miss; rays
-    passing elsewhere through the voxel leave it alone (the model and its reasons are
-    `sim.occupancy`'s). A voxel whose returns become held while it is FREE (misses of rays
-    passing beside a lone return brought it down) turns OCCUPIED, at `threshold + l_hit`. A miss
-    that brings a voxel to `l_min` forgets its returns. Each batch adds one return to the mean
-    of each voxel rays returned in (that of the first such ray).
+    which any ray ends on a surface gets `l_hit`, and at least `threshold + l_hit`. Every other
+    in-grid voxel that some ray passes through, or ends in without a return, gets `l_miss` -
+    unless the voxel holds returns: from at least `min_returns` batches, only a ray that passes
+    within `miss_radius` of their mean and, if it has a return, runs on past that point by more
+    than `miss_radius` plus `noise_sigmas` standard deviations of the range noise at its length
+    counts as a miss; from one batch, a ray that passes within `miss_radius` of it or returns
+    within a voxel's diagonal plus that margin beyond it. Rays passing elsewhere through the
+    voxel leave it alone (the model and its reasons are `sim.occupancy`'s). A miss that brings a
+    voxel to `l_min` forgets its returns. Each batch adds one return to the mean of each voxel
+    rays returned in (that of the first such ray).
     Log-odds are clamped to [l_min, l_max]. Rays with a non-finite endpoint are skipped; parts of
     rays outside the grid are skipped; the origin may lie outside.
 
@@ -249,6 +252,7 @@ def integrate_rays(
     radius_sq = miss_radius * miss_radius
     floor_l = np.float32(l_min)
     protected = min_returns << _COUNT_SHIFT
+    lone = 1 << _COUNT_SHIFT
     newly = 0
     hit_tag = 4 * batch
     miss_tag = 4 * batch + 1
@@ -302,8 +306,7 @@ def integrate_rays(
                 returns = np.int64(words[2 * v + 1])
                 if returns == SETTLED:
                     continue  # FREE at the floor, no returns: a miss changes nothing
-                if returns >= protected:
-                    # A surface seen here: only a ray through where it was seen contradicts it.
+                if returns >= lone:
                     if margin < 0.0:
                         length = math.sqrt(dx * dx + dy * dy + dz * dz)
                         margin = 0.0
@@ -318,17 +321,32 @@ def integrate_rays(
                     # t: where along the ray (0 at the origin, 1 at its end) it passes nearest.
                     t = (wx * dx + wy * dy + wz * dz) / (length * length) if length > 0.0 \
                         else 0.0
-                    if hit[r] and (1.0 - t) * length <= margin:
-                        continue  # the ray returned there, within the noise
-                    t = min(max(t, 0.0), 1.0)
-                    wx -= t * dx
-                    wy -= t * dy
-                    wz -= t * dz
-                    if wx * wx + wy * wy + wz * wz > radius_sq:
-                        continue  # it passed beside what was seen
+                    # How far the ray runs on past that point, in voxels.
+                    beyond = (1.0 - t) * length
+                    if returns >= protected:
+                        # A surface seen here: only a ray through where it was seen contradicts
+                        # it.
+                        if hit[r] and beyond <= margin:
+                            continue  # the ray returned there, within the noise
+                        lateral = True
+                    else:
+                        # A lone return: a surface found just behind it may be what it is the
+                        # range noise of, and a ray through it contradicts it; a ray passing
+                        # beside it and running on says nothing of it.
+                        lateral = not (hit[r] and beyond <= margin + _DIAGONAL)
+                    if lateral:
+                        t = min(max(t, 0.0), 1.0)
+                        wx -= t * dx
+                        wy -= t * dy
+                        wz -= t * dz
+                        if wx * wx + wy * wy + wz * wz > radius_sq:
+                            continue  # it passed beside what was seen
                 delta = l_miss
                 words[2 * v] = miss_tag
             new = np.float32(min(max(flat_l[v] + delta, l_min), l_max))
+            if delta > 0.0 and new <= threshold:
+                # A return is believed until a ray contradicts it: the voxel is occupied.
+                new = np.float32(min(threshold + l_hit, l_max))
             flat_l[v] = new
             if delta < 0.0 and new <= floor_l:
                 # A miss drove the voxel to the floor: it forgets its returns.
@@ -367,14 +385,6 @@ def integrate_rays(
                     qz = pz + math.floor((qz - pz) * w + 0.5)
                 word = (n << _COUNT_SHIFT) | (qz << 16) | (qy << 8) | qx
                 words[2 * v + 1] = word
-                was_held = returns != SETTLED and returns >= protected
-                if word >= protected and not was_held and flat_l[v] <= threshold:
-                    # Its returns are held from now on, so the misses that rays passing beside
-                    # them dealt before no longer count: it is occupied, as after a lone hit.
-                    flat_l[v] = np.float32(min(threshold + l_hit, l_max))
-                    flat_s[v] = _OCCUPIED
-                    i, j, k = _unflatten(v, ny, nz)
-                    _grow_box(changed, i, j, k)
         # A DDA path is monotone on every axis, so the first and last of any of its voxels
         # bound all of them.
         _grow_box(touched, fi, fj, fk)

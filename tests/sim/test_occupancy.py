@@ -195,12 +195,12 @@ def test_log_odds_are_clamped(grid: OccupancyMap) -> None:
     cfg = grid.config
     assert grid.log_odds[5, 0, 0] == np.float32(cfg.clamp_max)
     assert grid.log_odds[2, 0, 0] == np.float32(cfg.clamp_min)
-    # At the lower clamp the voxel forgot its returns; returns from two frames hold it, so the
-    # second hit makes it occupied again.
+    # A return is believed until a ray contradicts it: from the lower clamp one hit makes the
+    # voxel occupied, as a lone hit would from unknown.
     far = grid.index_to_world([2, 0, 0])
-    for expected in (VoxelState.FREE, VoxelState.OCCUPIED, VoxelState.OCCUPIED):
-        grid.integrate(origin, far[None], [True])
-        assert grid.state[2, 0, 0] == expected
+    grid.integrate(origin, far[None], [True])
+    assert grid.state[2, 0, 0] == VoxelState.OCCUPIED
+    assert grid.log_odds[2, 0, 0] == np.float32(cfg.occupied_threshold + cfg.log_odds_hit)
 
 
 def test_zero_length_ray_updates_only_its_voxel(grid: OccupancyMap) -> None:
@@ -405,46 +405,55 @@ def test_rays_passing_beside_seen_returns_leave_them() -> None:
     assert m.log_odds[idx] == pytest.approx(before + m.config.log_odds_miss)
 
 
-def test_a_voxel_with_returns_from_one_frame_takes_every_miss() -> None:
-    """Depth-noise speckle: returns in one frame only (however many) do not protect a voxel."""
+def test_a_lone_return_is_taken_by_rays_through_it_or_ending_just_behind_it() -> None:
+    """Returns from one frame (however many) are believed until a ray contradicts them: one
+    through the return (within the radius), or one returning on a surface just behind it, of
+    which the return may be depth-noise speckle (within a voxel's diagonal plus the noise
+    margin); rays passing beside it and running on leave it alone."""
     m = line_map()
+    cfg = m.config
     p = np.array([2.52, 1.03, 1.04])
     m.integrate(p - 2.0 * X, [p, p + 0.001], [True, True])
     idx = (25, 10, 10)
     assert m.state[idx] == VoxelState.OCCUPIED
-    origin = np.array([p[0] + 0.04, 0.05, p[2]])
+    beside = np.array([p[0] + 0.04, 0.05, p[2]])
     for _ in range(3):
-        m.integrate(origin, [[p[0] + 0.04, 1.95, p[2]]], [True])
+        m.integrate(beside, [[p[0] + 0.04, 1.95, p[2]]], [True])
+        m.integrate(beside, [[p[0] + 0.04, 1.95, p[2]]], [False])
+    assert m.log_odds[idx] == np.float32(cfg.log_odds_hit)
+    # A wall 12 cm behind the return, seen 4 cm beside it: the return may be its speckle.
+    m.integrate(beside, [[p[0] + 0.04, p[1] + 0.12, p[2]]], [True])
+    assert m.log_odds[idx] == pytest.approx(cfg.log_odds_hit + cfg.log_odds_miss)
+    # A ray through the return and on.
+    m.integrate(p - 0.5 * Y, [p + 0.9 * Y], [False])
+    assert m.log_odds[idx] == pytest.approx(cfg.log_odds_hit + 2 * cfg.log_odds_miss)
+    m.integrate(p - 0.5 * Y, [p + 0.9 * Y], [True])
     assert m.state[idx] == VoxelState.FREE
-    assert m.log_odds[idx] == pytest.approx(m.config.log_odds_hit + 3 * m.config.log_odds_miss)
 
 
-def test_a_free_voxel_whose_returns_become_held_is_occupied() -> None:
-    """A thin part seen in one frame, cleared by rays passing beside it, then seen again: its
-    two frames of returns hold it, so the misses dealt before no longer count and it is
-    occupied, as after a lone hit (it stayed FREE and held before: no miss could bring it back,
-    no pass-by ray could clear it, and the map kept it free while holding a surface)."""
-    m = line_map()
+def test_a_return_in_a_free_voxel_makes_it_occupied() -> None:
+    """A 2 cm rod in a 0.2 m voxel: rays passing beside it free the voxel before any hits the
+    rod; the first return in it makes it occupied (as a lone hit from unknown would) and rays
+    passing beside the rod afterwards leave it so. Summing log-odds, it stayed FREE, and a
+    flight that no longer faced the rod flew into it (NBVP on WAREHOUSE, 2026.12-10 before
+    this rule)."""
+    m = OccupancyMap(FLOOR, (20, 10, 10), 0.2)
     cfg = m.config
-    p = np.array([2.52, 1.03, 1.04])
-    idx = (25, 10, 10)
-    m.integrate(p - 2.0 * X, [p], [True])
-    beside = np.array([p[0] + 0.06, 0.05, p[2]])
-    for _ in range(6):
-        m.integrate(beside, [[p[0] + 0.06, 1.95, p[2]]], [True])
+    rod = np.array([2.1, 1.1, 1.1])  # in voxel (10, 5, 5)
+    idx = (10, 5, 5)
+    beside = np.array([rod[0] + 0.06, 0.05, rod[2]])
+    for _ in range(4):
+        m.integrate(beside, [[rod[0] + 0.06, 1.95, rod[2]]], [True])
     assert m.state[idx] == VoxelState.FREE
-    assert m.log_odds[idx] == pytest.approx(cfg.log_odds_hit + 6 * cfg.log_odds_miss)
     box = m.subscribe()
-    m.integrate(p - 2.0 * X, [p + 0.002 * Y], [True])
-    assert m.returns([idx])[1][0] == 2
+    m.integrate(rod - 3.0 * X, [rod], [True])
     assert m.state[idx] == VoxelState.OCCUPIED
     assert m.log_odds[idx] == pytest.approx(cfg.occupied_threshold + cfg.log_odds_hit)
     changed = box.take()
     assert changed is not None
     assert all(lo <= i < hi for lo, i, hi in zip(changed.lo, idx, changed.hi, strict=True))
-    # Held now: rays passing beside it leave it occupied.
     for _ in range(4):
-        m.integrate(beside, [[p[0] + 0.06, 1.95, p[2]]], [True])
+        m.integrate(beside, [[rod[0] + 0.06, 1.95, rod[2]]], [True])
     assert m.state[idx] == VoxelState.OCCUPIED
 
 
@@ -485,12 +494,11 @@ def test_a_voxel_driven_to_the_floor_forgets_its_returns() -> None:
         m.integrate(origin, [p + 1.0 * X], [True])  # through the mean
     assert m.log_odds[idx] == np.float32(cfg.clamp_min)
     assert m.returns([idx])[1][0] == 0
-    # New returns start a new mean; one frame of them protects nothing yet.
+    # New returns start a new mean, and the voxel is occupied again.
     m.integrate(origin, [p + 0.03 * X], [True])
     assert m.returns([idx])[1][0] == 1
-    m.integrate(p + 0.04 * X - Y, [p + 0.04 * X + Y], [True])
-    assert m.log_odds[idx] == pytest.approx(cfg.clamp_min + cfg.log_odds_hit
-                                            + cfg.log_odds_miss)
+    assert m.log_odds[idx] == np.float32(cfg.occupied_threshold + cfg.log_odds_hit)
+    np.testing.assert_allclose(m.returns([idx])[0][0], p + 0.03 * X, atol=0.1 / 256)
 
 
 def reference_integrate(ref: dict[str, npt.NDArray[np.float64]], m: OccupancyMap,
@@ -498,7 +506,7 @@ def reference_integrate(ref: dict[str, npt.NDArray[np.float64]], m: OccupancyMap
                         hit: npt.NDArray[np.bool_], raised: list[int]) -> None:
     """The update rule of `sim.occupancy`, voxel by voxel over `reference_voxels` paths:
     `ref` holds "log_odds" (nx, ny, nz), "mean" (nx, ny, nz, 3) in 1/256ths of the voxel and
-    "count" (nx, ny, nz); `raised[0]` counts the FREE voxels whose returns became held."""
+    "count" (nx, ny, nz); `raised[0]` counts the hits that made a FREE voxel occupied."""
     cfg, vs = m.config, m.voxel_size
     lo, mean, count = ref["log_odds"], ref["mean"], ref["count"]
     in_grid = [m.in_bounds(m.world_to_index(e)) and h for e, h in zip(ends, hit, strict=True)]
@@ -519,17 +527,24 @@ def reference_integrate(ref: dict[str, npt.NDArray[np.float64]], m: OccupancyMap
             if v in hit_voxels:
                 delta = cfg.log_odds_hit
             else:
-                if count[v] >= 2:
+                if count[v] >= 1:
                     p = np.array(v) + (mean[v] + 0.5) / 256.0
                     t = float((p - a) @ d) / length**2 if length > 0 else 0.0
-                    if h and (1.0 - t) * length <= margin:
+                    beyond = (1.0 - t) * length
+                    through = True
+                    if count[v] >= 2 and h and beyond <= margin:
                         continue
+                    if count[v] == 1 and h and beyond <= margin + np.sqrt(3.0):
+                        through = False  # a surface just behind a lone return
                     nearest = a + min(max(t, 0.0), 1.0) * d
-                    if np.linalg.norm(p - nearest) > cfg.miss_radius_m / vs:
+                    if through and np.linalg.norm(p - nearest) > cfg.miss_radius_m / vs:
                         continue
                 delta = cfg.log_odds_miss
             done.add(v)
             lo[v] = np.float32(min(max(lo[v] + delta, cfg.clamp_min), cfg.clamp_max))
+            if delta > 0 and lo[v] <= cfg.occupied_threshold:
+                lo[v] = np.float32(cfg.occupied_threshold + cfg.log_odds_hit)
+                raised[0] += 1
             if delta < 0 and lo[v] <= np.float32(cfg.clamp_min):
                 count[v] = 0
         if ok:
@@ -539,9 +554,6 @@ def reference_integrate(ref: dict[str, npt.NDArray[np.float64]], m: OccupancyMap
                 q = np.minimum(np.floor((b - np.floor(b)) * 256.0), 255.0)
                 n = min(count[v] + 1, 16)
                 mean[v] = q if n == 1 else mean[v] + np.floor((q - mean[v]) / n + 0.5)
-                if count[v] < 2 <= n and lo[v] <= cfg.occupied_threshold:
-                    lo[v] = np.float32(cfg.occupied_threshold + cfg.log_odds_hit)
-                    raised[0] += 1
                 count[v] = n
 
 

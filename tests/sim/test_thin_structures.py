@@ -1,7 +1,7 @@
 """Thin structures and doors in scripted camera passes with depth noise
 (`tests/sim/thin_scenes.py`): the map holds thin surfaces once seen, the plan check keeps paths
 off them, doors pass as the clearance rule implies, and depth-noise speckle seen up close is
-cleared; WAREHOUSE's 2 cm lamp rods in 0.2 m voxels are kept once seen from two frames."""
+cleared; WAREHOUSE's 2 cm lamp rods in 0.2 m voxels stay occupied once seen."""
 
 from __future__ import annotations
 
@@ -208,14 +208,14 @@ def test_speckle_seen_up_close_is_cleared(room: tuple[Area, list[ThinPart]]) -> 
         assert speckle[-1] == 0, (door.name, speckle)
 
 
-def test_rods_seen_in_two_frames_stay_occupied() -> None:
+def test_rods_seen_stay_occupied() -> None:
     """Fly-bys 1.6 m from 2 cm rods in 0.2 m voxels, looking along the motion (16 passes: four
     rods, four headings). From 4 m a frame's rays are 8 cm apart, so a rod's voxel is hit in one
-    frame, cleared by the next frames' rays beside the rod, and hit again nearer: its returns
-    then come from two frames and hold it, and it must be occupied, not held and FREE (which a
-    later flight not facing the rod would fly into, as FALCON v2 did on WAREHOUSE)."""
+    frame and passed by the next frames' rays beside the rod: every rod voxel a ray returned in
+    must stay occupied, for a later flight that no longer faces the rod relies on it (NBVP and
+    FALCON v2 flew into such rods on WAREHOUSE). Most of the rods must be held."""
     area = rod_hall()
-    held_free = occupied = total = 0
+    occupied = total = 0
     for k, rod in enumerate(RODS_XY):
         for h in range(4):
             m = new_map(area)
@@ -223,10 +223,7 @@ def test_rods_seen_in_two_frames_stay_occupied() -> None:
             voxels = rod_voxels(area, *rod)
             state = m.state[tuple(voxels.T)]
             count = m.returns(voxels)[1]
-            held_free += int(np.count_nonzero((count >= 2) & (state == VoxelState.FREE)))
+            assert np.all(state[count > 0] == VoxelState.OCCUPIED), (rod, h, state, count)
             occupied += int(np.count_nonzero(state == VoxelState.OCCUPIED))
             total += len(voxels)
-            # Every rod voxel holding returns from two frames is occupied.
-            assert np.all(state[count >= 2] == VoxelState.OCCUPIED), (rod, h)
-    assert held_free == 0
-    assert occupied >= 0.75 * total, (occupied, total)
+    assert occupied >= 0.9 * total, (occupied, total)
