@@ -16,17 +16,18 @@ cells over free ones). Two rules are added, for surfaces thinner than a voxel:
 **A return is believed until a ray contradicts it.** Every voxel also keeps where in it rays
 have returned: the running mean of one return point per frame (the first ray's of the frame to
 return there), to 1/256 of the voxel per axis, over the last 16 or so frames, and how many
-returns that mean holds. A hit leaves the voxel OCCUPIED: when the misses of earlier rays had
-brought it lower, its log-odds becomes `occupied_threshold + log_odds_hit`, as after a lone hit.
-A miss is then counted only from a ray that says something about the returns:
+returns that mean holds. A hit leaves the voxel OCCUPIED, with log-odds at least
+`occupied_threshold + log_odds_hit` (a lone hit's), however many misses of earlier rays had
+brought it lower. A miss is then counted only from a ray that says something about the returns:
 
 - returns from two or more frames (a surface seen): a ray passing within
   `OccupancyConfig.miss_radius_m` of their mean and running on past it by more than the radius
   plus twice the range noise at the ray's length (`OccupancyConfig.range_noise`); rays that
   pass elsewhere through the voxel, or return within that margin of the mean, leave it alone;
 - returns from one frame: a ray passing within the radius of the return, or one returning on a
-  surface just behind it (within a voxel's diagonal plus that margin), of which the return may
-  be range noise; rays passing beside it and running on leave it alone;
+  surface near it along the ray (ending less than a voxel's diagonal plus that margin past the
+  ray's nearest point to it), of which the return may be range noise; rays passing beside it
+  and running on leave it alone;
 - no returns: every ray through it, as in OctoMap.
 
 A miss that drives the voxel down to `clamp_min` forgets its returns. Why:
@@ -101,7 +102,7 @@ class OccupancyConfig(BaseModel):
     """Log-odds sensor model (see the module docstring for the surface-evidence rule).
 
     Attributes:
-        log_odds_hit: added to the voxel holding a ray's return (which is then at least
+        log_odds_hit: added to the voxel holding a ray's return (which is then at least at
             `occupied_threshold + log_odds_hit`).
         log_odds_miss: added to every voxel a ray passes through before its end (a voxel holding
             returns: only by rays that contradict them, see the module docstring).

@@ -207,8 +207,9 @@ def integrate_rays(
     unless the voxel holds returns: from at least `min_returns` batches, only a ray that passes
     within `miss_radius` of their mean and, if it has a return, runs on past that point by more
     than `miss_radius` plus `noise_sigmas` standard deviations of the range noise at its length
-    counts as a miss; from one batch, a ray that passes within `miss_radius` of it or returns
-    within a voxel's diagonal plus that margin beyond it. Rays passing elsewhere through the
+    counts as a miss; from fewer batches, a ray that passes within `miss_radius` of their mean
+    or returns near it along the ray (ends less than a voxel's diagonal plus that margin past
+    the ray's nearest point to the mean). Rays passing elsewhere through the
     voxel leave it alone (the model and its reasons are `sim.occupancy`'s). A miss that brings a
     voxel to `l_min` forgets its returns. Each batch adds one return to the mean of each voxel
     rays returned in (that of the first such ray).
@@ -251,6 +252,7 @@ def integrate_rays(
         return 0
     radius_sq = miss_radius * miss_radius
     floor_l = np.float32(l_min)
+    lifted = np.float32(min(threshold + l_hit, l_max))
     protected = min_returns << _COUNT_SHIFT
     lone = 1 << _COUNT_SHIFT
     newly = 0
@@ -344,9 +346,10 @@ def integrate_rays(
                 delta = l_miss
                 words[2 * v] = miss_tag
             new = np.float32(min(max(flat_l[v] + delta, l_min), l_max))
-            if delta > 0.0 and new <= threshold:
-                # A return is believed until a ray contradicts it: the voxel is occupied.
-                new = np.float32(min(threshold + l_hit, l_max))
+            if delta > 0.0:
+                # A return is believed until a ray contradicts it: the voxel is occupied, at
+                # least as firmly as after a lone hit.
+                new = max(new, lifted)
             flat_l[v] = new
             if delta < 0.0 and new <= floor_l:
                 # A miss drove the voxel to the floor: it forgets its returns.
@@ -383,8 +386,7 @@ def integrate_rays(
                     qx = px + math.floor((qx - px) * w + 0.5)
                     qy = py + math.floor((qy - py) * w + 0.5)
                     qz = pz + math.floor((qz - pz) * w + 0.5)
-                word = (n << _COUNT_SHIFT) | (qz << 16) | (qy << 8) | qx
-                words[2 * v + 1] = word
+                words[2 * v + 1] = (n << _COUNT_SHIFT) | (qz << 16) | (qy << 8) | qx
         # A DDA path is monotone on every axis, so the first and last of any of its voxels
         # bound all of them.
         _grow_box(touched, fi, fj, fk)
