@@ -13,7 +13,8 @@ noise drawn from the seed; true poses):
   and off every surface), ever during the passes and at their end; and the traversable voxels
   at the end (`sim.clearance`, the benchmark's safety radius), which speckle takes from.
 - **WAREHOUSE's lamp rods** (2 cm across, 1 m long, in 0.2 m voxels): fly-bys at 1.5 m/s past
-  eight rods, camera along the motion, four headings, passing 1.2-3.5 m from the rod's axis,
+  eight rods (four through the middle of their voxels, four along voxel faces), camera along
+  the motion, four headings, passing 1.2-3.5 m from the rod's axis,
   from 6 m before it to 3 m after. Once the rod is behind, how many of its voxels are occupied,
   how many hold returns, and how many hold returns yet are FREE, from any number of frames and
   from two or more (a later flight that does not face the rod relies on what the map kept).
@@ -36,8 +37,9 @@ from typing import Any
 HERE = Path(__file__).resolve().parent.parent
 
 # WAREHOUSE's lamp rods (`areas/warehouse.py`): x from 2.0 every 2.5 m, y = 8.5 and 12.5 among
-# others, from 2.3 m to 1.3 m below the roof truss line (z 9.5-10.5 m).
-_RODS = [(x, y) for x in (4.5, 9.5, 19.5, 29.5) for y in (8.5, 12.5)]
+# others, from 2.3 m to 1.3 m below the roof truss line (z 9.5-10.5 m). Those at x = 4.5, 9.5 ...
+# run through the middle of their 0.2 m voxels, those at x = 7.0, 12.0 ... along voxel faces.
+_RODS = [(x, y) for x in (4.5, 7.0, 19.5, 22.0) for y in (8.5, 12.5)]
 _ROD_Z = (9.5, 10.5)
 _FLYBY_Z = 10.0
 _LATERALS_M = (1.2, 1.6, 2.5, 3.5)
@@ -101,6 +103,16 @@ def _thin_room(seed: int) -> dict[str, Any]:
     }
 
 
+def _rod_voxels(m: Any, x: float, y: float) -> Any:
+    """(K, 3) the voxels holding some of a rod's cross-section (1 cm radius) at its heights."""
+    import numpy as np
+
+    zs = np.arange(_ROD_Z[0] + 0.01, _ROD_Z[1], 0.02)
+    points = [np.stack([np.full_like(zs, x + dx), np.full_like(zs, y + dy), zs], axis=1)
+              for dx in (-0.009, 0.009) for dy in (-0.009, 0.009)]
+    return np.unique(m.world_to_index(np.concatenate(points)), axis=0)
+
+
 def _rod_flybys(seed: int) -> dict[str, dict[str, int]]:
     import numpy as np
 
@@ -123,9 +135,7 @@ def _rod_flybys(seed: int) -> dict[str, dict[str, int]]:
             for h, heading in enumerate(_HEADINGS):
                 m = OccupancyMap(area.bounds_min, area.grid_shape, area.voxel_size)
                 rng = np.random.default_rng([seed, k, h])
-                zs = np.arange(_ROD_Z[0] + 0.01, _ROD_Z[1], 0.02)
-                rod = np.unique(m.world_to_index(
-                    np.stack([np.full_like(zs, x), np.full_like(zs, y), zs], axis=1)), axis=0)
+                rod = _rod_voxels(m, x, y)
                 along = np.array([math.cos(heading), math.sin(heading), 0.0])
                 side = np.array([-along[1], along[0], 0.0])
                 centre = np.array([x, y, _FLYBY_Z]) + lateral * side
@@ -159,7 +169,10 @@ def _measure(seeds: list[int]) -> dict[str, Any]:
 def _in_tree(tree: Path, seeds: list[int]) -> dict[str, Any]:
     cmd = [sys.executable, str(HERE / "benchmarks" / "map_fidelity.py"), "--child-tree",
            str(tree), "--seeds", ",".join(map(str, seeds))]
-    out = subprocess.run(cmd, cwd=tree, check=True, capture_output=True, text=True)
+    out = subprocess.run(cmd, cwd=tree, capture_output=True, text=True)
+    if out.returncode != 0:
+        tail = "\n".join(out.stderr.strip().splitlines()[-8:])
+        raise SystemExit(f"the passes failed with the code of {tree}:\n{tail}")
     return dict(json.loads(out.stdout.strip().splitlines()[-1]))
 
 
@@ -173,8 +186,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
     except ValueError:
-        raise SystemExit(f"--seeds {args.seeds!r}: not a comma-separated list of integers"
-                         ) from None
+        seeds = []
+    if not seeds or min(seeds) < 0:
+        raise SystemExit(f"--seeds {args.seeds!r}: give a comma-separated list of integers >= 0")
     if args.child_tree is not None:
         # Every package from that tree (this file's own code imports none of them at the top).
         sys.path.insert(0, str(args.child_tree))

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import inspect
 import sys
 import time
 from pathlib import Path
@@ -79,9 +80,15 @@ def main(argv: list[str] | None = None) -> int:
     other = args.baseline / "sim" / "occupancy_kernels.py"
     if not other.is_file():
         raise SystemExit(f"--baseline {args.baseline}: no sim/occupancy_kernels.py in it")
+    from areas.registry import all_area_names
+
+    known = set(all_area_names())
     for path in args.recordings:
         if not path.is_file() or "--" not in path.name:
             raise SystemExit(f"--recordings {path}: not a crash-sweep recording (AREA--...npz)")
+        if path.name.split("--", 1)[0] not in known:
+            raise SystemExit(f"--recordings {path}: no area named "
+                             f"{path.name.split('--', 1)[0]!r} (`flybo areas list`)")
 
     import sim.occupancy as occupancy
     from benchmarks.common import print_table, write_json
@@ -92,9 +99,16 @@ def main(argv: list[str] | None = None) -> int:
     baseline = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(baseline)
     kernels = {"this": occupancy.integrate_rays, "baseline": baseline.integrate_rays}
+    ours, theirs = (inspect.signature(k.py_func) for k in kernels.values())
+    if ours != theirs:
+        raise SystemExit(f"--baseline {args.baseline}: its integrate_rays takes other arguments "
+                         f"({theirs} against {ours})")
     rows, measured = [], []
     try:
         for name, area, frames in _scenes(args.recordings):
+            if not frames:
+                print(f"{name}: no poses, skipped", flush=True)
+                continue
             for kernel in kernels.values():  # compiled (or loaded from numba's cache) first
                 occupancy.integrate_rays = kernel
                 new_map(area).integrate(*frames[0])

@@ -238,7 +238,8 @@ def door_pass(door: Door) -> list[Pose]:
 ROD_VOXEL = 0.2
 ROD_RADIUS = 0.01
 ROD_Z = (1.5, 2.5)
-RODS_XY = ((4.5, 4.5), (7.5, 4.5), (4.5, 7.5), (7.5, 7.5))
+# Through the middle of its voxels, along an x face, along a y face, along a voxel edge.
+RODS_XY = ((4.5, 4.5), (8.0, 4.5), (4.5, 8.0), (8.0, 8.0))
 FLYBY_Z = 2.0
 
 
@@ -269,9 +270,12 @@ def rod_hall() -> Area:
 
 
 def rod_voxels(area: Area, x: float, y: float) -> IndexArray:
-    """(K, 3) the voxels a rod's axis passes through."""
+    """(K, 3) the voxels holding some of a rod's cross-section (one to four per height)."""
     zs = np.arange(ROD_Z[0] + 0.01, ROD_Z[1], 0.02)
-    points = np.stack([np.full_like(zs, x), np.full_like(zs, y), zs], axis=1)
+    offsets = [(dx, dy) for dx in (-0.9, 0.9) for dy in (-0.9, 0.9)]
+    points = np.concatenate([np.stack([np.full_like(zs, x + dx * ROD_RADIUS),
+                                       np.full_like(zs, y + dy * ROD_RADIUS), zs], axis=1)
+                             for dx, dy in offsets])
     idx = np.floor((points - area.bounds_min) / area.voxel_size).astype(np.int64)
     return np.unique(idx, axis=0)
 
