@@ -239,7 +239,9 @@ def test_an_obstacle_found_on_the_path_in_flight_stops_the_vehicle_before_it(
     assert speed < 0.1  # asked again at rest
     assert planner.goal is not None
     flown = np.linalg.norm(stopped_at - planner.start)
-    assert flown > 1.0  # it was under way when the obstacle appeared
+    # It was under way when the obstacle appeared: found at the third update (0.6 s after the
+    # plan), when one return is enough to make its voxel occupied, it flew on while braking.
+    assert flown > 0.5
     # Stopped short of the obstacle by more than the vehicle's radius.
     assert np.linalg.norm(obstacle - stopped_at) > 0.35
     assert flown < np.linalg.norm(obstacle - planner.start)
