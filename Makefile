@@ -55,9 +55,10 @@ run: install
 demo-run: install
 	$(BIN)/flybo run --area maze --planner classic --seed 0 --out data/runs/maze-classic-$$(date +%Y%m%d-%H%M%S)
 
-# Tests run in TEST_JOBS processes (pytest-xdist; tests/conftest.py keeps what must run together in
-# one); TEST_JOBS=0 runs them in this process.
-TEST_JOBS ?= $(shell nproc)
+# Tests run in TEST_JOBS processes (pytest-xdist); TEST_JOBS=0 runs them in this process. One
+# process more than cores: many tests spend their time waiting on services, sandboxes and
+# subprocesses they started, and the extra process keeps every core busy meanwhile.
+TEST_JOBS ?= $(shell echo $$(( $$(nproc) + 1 )))
 
 # Everything: lint, types and every test (the slow ones, the browser tests and the wheel's
 # install into a fresh environment included). Tests are handed to the processes in chunks as they

@@ -13,6 +13,9 @@ An entry is a test file, or a test (every parametrization of it). Measure with
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from typing import Any
+
 import pytest
 
 import flybo  # noqa: F401  first: it pins the CPU kernels before NumPy loads (flybo.cpu_kernels)
@@ -68,3 +71,13 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if _is_slow(item):
             item.add_marker(pytest.mark.slow)
+
+
+@pytest.fixture(scope="session")
+def playwright_driver() -> Iterator[Any]:
+    """One Playwright driver per test process: its sync API runs an event loop, and a second
+    driver started while the first is open refuses to start (both browser suites use this)."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as driver:
+        yield driver

@@ -37,7 +37,7 @@ def test_kill_9_ten_times(stack: Stack, database: str) -> None:
     stack.start_api()
     stack.start_worker()
     stack.start_worker()
-    job = stack.submit(planner="classic", areas=["maze"], runs=8, seconds=45, preset="exact")
+    job = stack.submit(planner="classic", areas=["maze"], runs=8, seconds=25, preset="exact")
     jobs = [job]
     kills: list[int] = []
     attempts_killed: set[tuple[int, int]] = set()
@@ -55,7 +55,7 @@ def test_kill_9_ten_times(stack: Stack, database: str) -> None:
                 break
         if run is None:
             if stack.get(f"/jobs/{job['id']}")["status"] == "succeeded":  # need more victims
-                job = stack.submit(planner="classic", areas=["maze"], runs=4, seconds=45,
+                job = stack.submit(planner="classic", areas=["maze"], runs=4, seconds=25,
                                    preset="exact")
                 jobs.append(job)
             time.sleep(0.3)

@@ -4,22 +4,20 @@ made by hand."""
 from __future__ import annotations
 
 import itertools
+import json
 import math
 
 import numpy as np
 import pytest
 
-from areas import load_area, load_ground_truth
 from planners.registry import PlannerSpec, make, planner_ids, spec, specs
 from sim.camera import CameraConfig
-from sim.config import preset
 from sim.geometry import Pose
 from sim.interface import Observation, Plan, PlannerContext, PlanOutcome
 from sim.map_view import MappingStack
 from sim.result import EpisodeResult, RunStatus
 from sim.vehicle import VehicleLimits
-
-SECONDS = 40
+from tests.sim.episode_fingerprints import SECONDS, STORE, fingerprint, run_flight
 
 # The hand-made situation: a 4 x 4 x 2.5 m grid with a carved free ball around its centre.
 BOUNDS_MIN = np.zeros(3)
@@ -33,17 +31,10 @@ BALL_RADIUS = 1.5
 
 @pytest.fixture(scope="module", params=planner_ids())
 def exact_flights(request: pytest.FixtureRequest) -> tuple[str, EpisodeResult, EpisodeResult]:
-    """Two short flights of one planner through the MAZE, same seed, planning time not charged
-    (the exact preset)."""
-    from sim.episode import run_episode
-
+    """Two short flights of one planner through the MAZE in one process, same seed, planning time
+    not charged (the exact preset): the flight whose fingerprint is stored."""
     planner_id: str = request.param
-    area = load_area("maze")
-    runs = [
-        run_episode(area, load_ground_truth(area), make(planner_id), preset("exact"), seed=0,
-                    planner_name=planner_id, seconds=SECONDS)
-        for _ in range(2)
-    ]
+    runs = [run_flight(planner_id) for _ in range(2)]
     return planner_id, runs[0], runs[1]
 
 
@@ -60,8 +51,9 @@ def test_short_exact_flight_in_the_maze(
 
     times, volume = result.volume_times, result.volume_m3
     # One sample per simulated second, t = 0 .. SECONDS, even after an early finish.
-    assert len(times) == SECONDS + 1
-    np.testing.assert_allclose(times, np.arange(SECONDS + 1, dtype=np.float64), atol=1e-6)
+    samples = round(SECONDS) + 1
+    assert len(times) == samples
+    np.testing.assert_allclose(times, np.arange(samples, dtype=np.float64), atol=1e-6)
     assert volume.shape == times.shape
     assert np.all(np.isfinite(volume))
     # The known-voxel count never decreases, so neither does the explored volume.
@@ -74,6 +66,16 @@ def test_short_exact_flight_in_the_maze(
     assert len(planning) == result.iterations
     assert np.all(np.isfinite(planning))
     assert np.all(planning >= 0.0)
+
+
+@pytest.mark.slow
+def test_flight_matches_its_fingerprint(
+    exact_flights: tuple[str, EpisodeResult, EpisodeResult],
+) -> None:
+    planner_id, result, _ = exact_flights
+    stored: dict[str, str] = json.loads(STORE.read_text())
+    assert fingerprint(result.to_json()) == stored[planner_id], (
+        f"{planner_id} on MAZE (exact preset) no longer flies as its stored fingerprint says")
 
 
 @pytest.mark.slow
