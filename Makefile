@@ -55,10 +55,11 @@ run: install
 demo-run: install
 	$(BIN)/flybo run --area maze --planner classic --seed 0 --out data/runs/maze-classic-$$(date +%Y%m%d-%H%M%S)
 
-# Tests run in TEST_JOBS processes (pytest-xdist); TEST_JOBS=0 runs them in this process. One
-# process more than cores: many tests spend their time waiting on services, sandboxes and
-# subprocesses they started, and the extra process keeps every core busy meanwhile.
-TEST_JOBS ?= $(shell echo $$(( $$(nproc) + 1 )))
+# Tests run in TEST_JOBS processes (pytest-xdist); TEST_JOBS=0 runs them in this process. Two
+# processes per core: many tests spend their time waiting on services, sandboxes and subprocesses
+# they started, and the other process keeps the core busy meanwhile. The 25 slowest test phases
+# are listed at the end.
+TEST_JOBS ?= $(shell echo $$(( 2 * $$(nproc) )))
 
 # Everything: lint, types and every test (the slow ones, the browser tests and the wheel's
 # install into a fresh environment included). Tests are handed to the processes in chunks as they
@@ -66,7 +67,7 @@ TEST_JOBS ?= $(shell echo $$(( $$(nproc) + 1 )))
 test: install test-system-deps
 	$(BIN)/ruff check .
 	$(BIN)/mypy
-	$(BIN)/pytest -n $(TEST_JOBS) --dist load
+	$(BIN)/pytest -n $(TEST_JOBS) --dist load --durations=25
 
 # The inner loop, a few minutes: lint, types and the tests not marked `slow` (tests/conftest.py
 # marks the long ones of every folder). Needs no browser.

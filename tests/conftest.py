@@ -73,10 +73,11 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.slow)
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def playwright_driver() -> Iterator[Any]:
-    """One Playwright driver per test process: its sync API runs an event loop, and a second
-    driver started while the first is open refuses to start (both browser suites use this)."""
+    """The Playwright driver of one test module. Its sync API keeps an event loop running in
+    the process while it is open: a second driver refuses to start, and so does any
+    `asyncio.run` of a later test in the process, so it is closed after the module's tests."""
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as driver:

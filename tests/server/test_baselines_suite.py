@@ -1,5 +1,5 @@
 """A small real suite through the whole baseline machinery: flown by the worker's own
-`execute_run` (2 planners x 2 areas x 3 runs of 20 simulated seconds, in the exact and the
+`execute_run` (2 planners x 2 areas x 3 runs of 10 simulated seconds, in the exact and the
 default preset), exported by `flybo baselines export`, imported into SQLite and PostgreSQL,
 ranked with intervals, reported by `flybo report --dataset` alone, and verified by
 `flybo baselines verify`."""
@@ -33,7 +33,7 @@ pytestmark = pytest.mark.slow
 
 PLANNERS = ("classic", "rapid")
 AREAS = ["maze", "facility-a"]
-RUNS, SECONDS = 3, 20.0
+RUNS, SECONDS = 3, 10.0
 PRESETS = ("exact", "default")
 
 

@@ -104,7 +104,7 @@ def chromium_path() -> str:
     return str(CHROMIUM)
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def browser(chromium_path: str, playwright_driver: Any) -> Iterator[Any]:
     chromium = playwright_driver.chromium.launch(executable_path=chromium_path)
     yield chromium
