@@ -62,16 +62,11 @@ demo-run: install
 TEST_JOBS ?= $(shell echo $$(( 2 * $$(nproc) )))
 
 # Everything: lint, types and every test (the slow ones, the browser tests and the wheel's
-# install into a fresh environment included), after the numba kernels are compiled
-# (tests/warm_kernels.py). Tests are handed to the processes in chunks as they
+# install into a fresh environment included). Tests are handed to the processes in chunks as they
 # free up; a module fixture is set up in each process that runs one of its file's tests.
 test: install test-system-deps
 	$(BIN)/ruff check .
-	@mkdir -p test-artifacts; \
-	$(BIN)/python tests/warm_kernels.py > test-artifacts/warm_kernels.log 2>&1 & warm=$$!; \
-	echo "$(BIN)/mypy"; $(BIN)/mypy; typed=$$?; \
-	wait $$warm; warmed=$$?; cat test-artifacts/warm_kernels.log; \
-	[ $$typed = 0 ] && [ $$warmed = 0 ]
+	$(BIN)/mypy
 	$(BIN)/pytest -n $(TEST_JOBS) --dist load --durations=25
 
 # The inner loop, a few minutes: lint, types and the tests not marked `slow` (tests/conftest.py
