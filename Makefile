@@ -55,11 +55,12 @@ run: install
 demo-run: install
 	$(BIN)/flybo run --area maze --planner classic --seed 0 --out data/runs/maze-classic-$$(date +%Y%m%d-%H%M%S)
 
-# Tests run in TEST_JOBS processes (pytest-xdist); TEST_JOBS=0 runs them in this process. Two
-# processes per core: many tests spend their time waiting on services, sandboxes and subprocesses
-# they started, and the other process keeps the core busy meanwhile. The 25 slowest test phases
-# are listed at the end.
-TEST_JOBS ?= $(shell echo $$(( 2 * $$(nproc) )))
+# Tests run in TEST_JOBS processes (pytest-xdist); TEST_JOBS=0 runs them in this process. One
+# process more than cores: many tests spend their time waiting on services, sandboxes and
+# subprocesses they started, and the extra process keeps every core busy meanwhile (two per core
+# loaded the machine so that a Redis round trip of the shared rate limit timed out). The 25
+# slowest test phases are listed at the end.
+TEST_JOBS ?= $(shell echo $$(( $$(nproc) + 1 )))
 
 # Everything: lint, types and every test (the slow ones, the browser tests and the wheel's
 # install into a fresh environment included). Tests are handed to the processes in chunks as they
