@@ -3,6 +3,7 @@
     .venv/bin/python benchmarks/paper_findings.py [--planners classic rapid ...] \
         [--areas maze warehouse ...] [--runs 5 | --seeds 0 3] [--preset default] \
         [--seconds S] [--jobs 2] [--name NAME] [--load A.json B.json]
+    .venv/bin/python benchmarks/paper_findings.py --sweep benchmarks/results/crash_sweep.jsonl
 
 Flies every planner x area x seed to the area's plateau time (or `--seconds`), `--jobs` runs at
 a time in separate processes, then prints per area the relative coverage (the leaderboard's:
@@ -10,7 +11,8 @@ explored observable volume over the best planner's mean on that area) and the F-
 paper's, the Kendall tau between our average ranks and the paper's (both ranked over the planners
 and areas flown here), and each finding of the paper's sections 4.1-4.3 marked held, not held or
 not measured. `--load` reads the runs of earlier JSONs instead of flying (subsets flown apart
-are compared together). Writes `benchmarks/results/paper_findings.json` (or `--name`).
+are compared together); `--sweep` reads a crash sweep's runs (one per cell, no RMSE). Writes
+`benchmarks/results/paper_findings.json` (or `--name`).
 """
 
 from __future__ import annotations
@@ -71,26 +73,59 @@ def family(planner_id: str) -> str:
     return parse_id(planner_id)[0]
 
 
+def _explored(run: dict[str, Any]) -> float:
+    """What relative coverage divides: the explored observable volume, or, for a crash-sweep
+    run that does not store it, the coverage (the same volume over the area's observable
+    volume, so the ratios within an area are the same)."""
+    return float(run["explored_observable_m3"] if "explored_observable_m3" in run
+                 else run["coverage"])
+
+
 def our_cells(runs: list[dict[str, Any]]) -> Cells:
-    """Means per planner family and area; relative coverage as the leaderboard's."""
+    """Means per planner family and area; relative coverage as the leaderboard's. A score
+    that some run of a cell lacks (a crash sweep stores no RMSE or recall) is left out."""
     groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for run in runs:
         groups.setdefault((family(run["planner"]), run["area"]), []).append(run)
     best: dict[str, float] = {}
     for (_, area), members in groups.items():
-        mean = float(np.mean([m["explored_observable_m3"] for m in members]))
+        mean = float(np.mean([_explored(m) for m in members]))
         best[area] = max(best.get(area, 0.0), mean)
     cells: Cells = {}
     for (name, area), members in groups.items():
-        cells.setdefault(name, {})[area] = {
+        cell = {
             "coverage": float(np.mean([m["coverage"] for m in members])),
-            "relative": float(np.mean([relative_coverage(m["explored_observable_m3"], best[area])
+            "relative": float(np.mean([relative_coverage(_explored(m), best[area])
                                        for m in members])),
-            "fscore": float(np.mean([m["fscore"] for m in members])),
-            "rmse": float(np.mean([m["rmse_m"] for m in members])),
-            "recall": float(np.mean([m["recall"] for m in members])),
         }
+        for key, field in (("fscore", "fscore"), ("rmse", "rmse_m"), ("recall", "recall")):
+            if all(m.get(field) is not None for m in members):
+                cell[key] = float(np.mean([m[field] for m in members]))
+        cells.setdefault(name, {})[area] = cell
     return cells
+
+
+def sweep_runs(path: Path, benchmark: str | None) -> list[dict[str, Any]]:
+    """The runs of a crash sweep's log (`benchmarks/crash_sweep.py`) that this comparison can
+    use: benchmark `benchmark` (default: this tree's), the paper's areas, and per planner
+    family of the paper the version its name resolves to now (the leaderboard's default)."""
+    from flybo.versions import benchmark_version
+    from planners.registry import UnknownPlannerError, spec
+
+    wanted = benchmark or benchmark_version()
+    latest = {}
+    for name in PLANNERS:
+        try:
+            latest[name] = spec(name).id
+        except UnknownPlannerError:
+            continue
+    runs = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    chosen = [r for r in runs if r.get("benchmark") == wanted and r["area"] in AREAS
+              and r["planner"] == latest.get(family(r["planner"]))]
+    if not chosen:
+        raise SystemExit(f"{path}: no run of benchmark {wanted} by "
+                         f"{', '.join(latest.values())} on the paper's areas")
+    return chosen
 
 
 def paper_cells(planners: list[str], areas: list[str]) -> Cells:
@@ -163,11 +198,21 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=1, help="runs flown at a time")
     parser.add_argument("--load", type=Path, nargs="+", default=None,
                         help="take the runs from these JSONs (of this script) instead of flying")
+    parser.add_argument("--sweep", type=Path, default=None,
+                        help="take the runs from a crash sweep's log (crash_sweep.jsonl): "
+                             "coverage and F-score only, no RMSE")
+    parser.add_argument("--benchmark", default=None,
+                        help="with --sweep: the benchmark version whose runs to take "
+                             "(default: this tree's)")
     parser.add_argument("--name", default="paper_findings",
                         help="the JSON's name under benchmarks/results/")
     args = parser.parse_args()
-    runs = [r for path in args.load for r in json.loads(path.read_text())["runs"]] \
-        if args.load else fly_all(args)
+    if args.load:
+        runs = [r for path in args.load for r in json.loads(path.read_text())["runs"]]
+    elif args.sweep:
+        runs = sweep_runs(args.sweep, args.benchmark)
+    else:
+        runs = fly_all(args)
     summary = compare(runs)
     report(summary)
     path = write_json(args.name, {

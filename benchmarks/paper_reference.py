@@ -71,7 +71,7 @@ def average_ranks(cells: Cells, key: str, lower_is_better: bool = False) -> dict
     sums: dict[str, list[float]] = {p: [] for p in cells}
     sign = -1.0 if lower_is_better else 1.0
     for area in areas:
-        here = {p: sign * cells[p][area][key] for p in cells if area in cells[p]}
+        here = {p: sign * cells[p][area][key] for p in cells if key in cells[p].get(area, {})}
         for p, r in ranks(here).items():
             sums[p].append(r)
     return {p: float(np.mean(v)) for p, v in sums.items() if v}
@@ -132,7 +132,11 @@ def _rapid_narrow(cells: Cells) -> bool | None:
 def _by_rank(key: str, lower: bool, check: Callable[[dict[str, float]], bool]
              ) -> Callable[[Cells], bool | None]:
     def held(cells: Cells) -> bool | None:
-        return check(average_ranks(cells, key, lower)) if _all_planners(cells) else None
+        if not _all_planners(cells):
+            return None
+        order = average_ranks(cells, key, lower)
+        # A score not measured for every planner (a crash sweep has no RMSE) decides nothing.
+        return check(order) if set(PLANNERS) <= set(order) else None
     return held
 
 

@@ -4,6 +4,7 @@ comparison of a set of runs."""
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -13,7 +14,7 @@ import pytest
 # The benchmark scripts are not an installed package: they run from the project folder.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.paper_findings import compare, our_cells, paper_cells
+from benchmarks.paper_findings import compare, our_cells, paper_cells, sweep_runs
 from benchmarks.paper_reference import (
     AREAS,
     PAPER_TABLE2,
@@ -83,3 +84,42 @@ def test_a_subset_is_compared_over_its_own_planners_and_areas() -> None:
     statuses = {f["finding"]: f["status"] for f in summary["findings"]}
     assert statuses["the Pareto set is ESM-IPP, ESM-Recon and SplatPlanner"] == "not measured"
     assert summary["kendall_tau"]["fscore"] == pytest.approx(-1.0)
+
+
+def _sweep_row(planner: str, area: str, coverage: float, fscore: float,
+               benchmark: str) -> dict[str, Any]:
+    """A run as `benchmarks/crash_sweep.py` logs it: no explored volume, RMSE or recall."""
+    return {"planner": planner, "area": area, "seed": 0, "seconds": None,
+            "benchmark": benchmark, "coverage": coverage, "fscore": fscore, "collisions": 0}
+
+
+def test_a_crash_sweep_log_is_compared_on_coverage_and_fscore_alone(tmp_path: Path) -> None:
+    from flybo.versions import benchmark_version
+    from planners.registry import spec
+
+    here = benchmark_version()
+    latest = {name: spec(name).id for name in PLANNERS}
+    rows = [_sweep_row(latest[p], area, 0.99 - 0.01 * i, 0.9 - 0.01 * i, here)
+            for i, p in enumerate(PLANNERS) for area in ("maze", "warehouse")]
+    older = [_sweep_row(latest["classic"], "maze", 1.0, 1.0, "2000.01-1"),
+             _sweep_row("classic-v1", "maze", 1.0, 1.0, here),  # not the name's version now
+             _sweep_row(latest["classic"], "cafe", 1.0, 1.0, here)]  # not a paper area
+    log = tmp_path / "crash_sweep.jsonl"
+    log.write_text("".join(json.dumps(r) + "\n" for r in rows + older))
+
+    runs = sweep_runs(log, None)
+    assert sorted(map(json.dumps, runs)) == sorted(map(json.dumps, rows))
+    summary = compare(runs)
+    # Coverage stands in for the explored volume: the same ratios within an area.
+    assert summary["ours"]["classic"]["maze"]["relative"] == pytest.approx(1.0)
+    assert summary["ours"]["rapid"]["maze"]["relative"] == pytest.approx(0.98 / 0.99)
+    assert "rmse" not in summary["ours"]["classic"]["maze"]
+    assert summary["kendall_tau"]["rmse"] is None
+    assert summary["kendall_tau"]["relative"] is not None
+    statuses = {f["finding"]: f["status"] for f in summary["findings"]}
+    assert statuses["ESM-IPP has the best RMSE (best average RMSE rank)"] == "not measured"
+    assert statuses["ESM-IPP is the clear coverage winner (best average coverage rank)"] == \
+        "not held"
+
+    with pytest.raises(SystemExit, match=r"no run of benchmark 1999\.01-1"):
+        sweep_runs(log, "1999.01-1")
