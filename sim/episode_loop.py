@@ -22,6 +22,7 @@ from sim.config import EpisodeConfig
 from sim.episode_recorder import EpisodeRecorder
 from sim.flight import Flight, hold_at, startup_spin
 from sim.geometry import Pose
+from sim.heap import release_free_heap
 from sim.interface import Observation, Plan, PlannerContext, PlannerLike, PlanOutcome
 from sim.measures import EpisodeCounters, EpisodeEnd, EpisodeView, Measure, make_measures
 from sim.measures.base import ProgressCallback
@@ -362,6 +363,9 @@ class EpisodeLoop:
         end = EpisodeEnd(ending.status, self.t_end, simulated_until)
         done: dict[str, Any] = {}
         for measure in self.measures:
+            # The final measures (the mesh, its scoring) each take hundreds of MiB for a
+            # moment: what the flight and the previous measure freed goes back first.
+            release_free_heap()
             done[measure.name] = measure.result(self.view, end, {
                 name: done[name] for name in measure.requires})
         metrics: dict[str, float | None] = {}
