@@ -61,3 +61,43 @@ def test_sdf_recall_agrees_with_point_recall(fused: tuple[TsdfVolume, np.ndarray
     # Far from any surface: not recalled.
     off, off_w = volume.sdf_at(wall - [1.0, 0.0, 0.0])
     assert sdf_surface_recall(off, off_w, 0.05, 1.0) == 0.0
+
+
+def _box_flight(config: TsdfConfig) -> TsdfVolume:
+    vertices, triangles = _box((6.0, 5.0, 2.5))
+    camera = DepthCamera(vertices, triangles)
+    volume = TsdfVolume(camera.config.intrinsic_matrix(), 5.0, config)
+    for k, yaw in enumerate(np.arange(0.0, 2 * np.pi, 0.25)):
+        pose = Pose(np.array([1.5 + 0.1 * k, 2.5, 1.25]), float(yaw))
+        volume.integrate(camera.render(pose).depth, pose)
+    return volume
+
+
+def test_a_block_table_grown_many_times_holds_the_same_field() -> None:
+    """The table grows by BLOCK_GROWTH before Open3D would double it; a run reads the TSDF by
+    block key, so a table that grew from 100 blocks gives the same field, points and mesh as
+    one that never had to grow."""
+    from sim.tsdf import BLOCK_GROWTH
+
+    grown = _box_flight(TsdfConfig(initial_block_count=100))
+    whole = _box_flight(TsdfConfig(initial_block_count=20_000))
+    used = grown._grid.hashmap().size()
+    assert used == whole._grid.hashmap().size() > 1_000
+    # It grew from 100 blocks by the factor, not by doubling (which would have left it at
+    # 1,600 blocks for these 1,264).
+    assert used <= grown._grid.hashmap().capacity() <= np.ceil(used * BLOCK_GROWTH)
+
+    rng = np.random.default_rng(3)
+    probes = rng.uniform([-0.2, -0.2, -0.2], [6.2, 5.2, 2.7], size=(20_000, 3))
+    for a, b in zip(grown.sdf_at(probes), whole.sdf_at(probes), strict=True):
+        np.testing.assert_array_equal(a, b)
+
+    def rows(points: np.ndarray) -> np.ndarray:
+        return points[np.lexsort(points.T[::-1])]
+
+    np.testing.assert_array_equal(rows(grown.surface_points()), rows(whole.surface_points()))
+    (gv, gt), (wv, wt) = grown.mesh(), whole.mesh()
+    np.testing.assert_array_equal(rows(gv), rows(wv))
+    assert len(gt) == len(wt)
+    np.testing.assert_array_equal(rows(np.sort(gv[gt].reshape(len(gt), 9), axis=1)),
+                                  rows(np.sort(wv[wt].reshape(len(wt), 9), axis=1)))
