@@ -35,6 +35,32 @@ def _flatten(items: list[np.ndarray], dtype: npt.DTypeLike, width: int | None) -
     return flat, offsets
 
 
+def thinned(points: np.ndarray, voxel_m: float, chunk: int = 1 << 20) -> np.ndarray:
+    """The first of `points` (N, 3) in each cell of a `voxel_m` grid, in their order.
+
+    A cell is `floor(point / voxel_m)` in float64. The cells are computed `chunk` points at a
+    time, so that a snapshot of millions of points needs one int64 key per point beside them,
+    not float64 and int64 copies of the whole cloud."""
+    n = len(points)
+    if n == 0:
+        return points
+
+    def cells(start: int) -> npt.NDArray[np.int64]:
+        part = np.asarray(points[start:start + chunk], dtype=np.float64)
+        return np.floor(part / voxel_m).astype(np.int64)
+
+    starts = range(0, n, chunk)
+    bounds = [(c.min(axis=0), c.max(axis=0)) for c in map(cells, starts)]
+    lo = np.min([b[0] for b in bounds], axis=0)
+    span = np.max([b[1] for b in bounds], axis=0) - lo + 1
+    keys = np.empty(n, dtype=np.int64)
+    for s in starts:
+        c = cells(s) - lo
+        keys[s:s + len(c)] = (c[:, 0] * span[1] + c[:, 1]) * span[2] + c[:, 2]
+    _, first = np.unique(keys, return_index=True)
+    return points[np.sort(first)]
+
+
 @dataclass
 class RecordingWriter:
     """Collects a run as it happens; `save` writes it once."""
@@ -73,16 +99,8 @@ class RecordingWriter:
 
     def surface(self, time: float, points: np.ndarray, voxel_m: float) -> None:
         """Store the reconstructed surface at `time`, thinned to one point per `voxel_m` cell."""
-        pts = np.asarray(points, dtype=np.float64)
-        if len(pts):
-            cells = np.floor(pts / voxel_m).astype(np.int64)
-            cells -= cells.min(axis=0)
-            span = cells.max(axis=0) + 1
-            keys = (cells[:, 0] * span[1] + cells[:, 1]) * span[2] + cells[:, 2]
-            _, first = np.unique(keys, return_index=True)
-            pts = pts[np.sort(first)]
         self._surface_times.append(time)
-        self._surfaces.append(pts.astype(np.float32))
+        self._surfaces.append(thinned(np.asarray(points), voxel_m).astype(np.float32, copy=False))
 
     def save(self, path: Path) -> None:
         key_idx, key_off = _flatten(self._key_indices, np.uint32, None)

@@ -82,15 +82,16 @@ class TsdfVolume:
         if needed > capacity:
             table.reserve(max(needed, math.ceil(capacity * BLOCK_GROWTH)))
 
-    def surface_points(self) -> npt.NDArray[np.float64]:
-        """(N, 3) points on the fused surface (empty before the first frame)."""
+    def surface_points(self) -> npt.NDArray[np.float32]:
+        """(N, 3) points on the fused surface, as Open3D computes them (float32; empty before
+        the first frame)."""
         if self.frames == 0:
-            return np.zeros((0, 3))
+            return np.zeros((0, 3), dtype=np.float32)
         try:
             cloud = self._grid.extract_point_cloud(self.config.weight_threshold)
         except RuntimeError:  # Open3D raises instead of returning an empty cloud
-            return np.zeros((0, 3))
-        return np.asarray(cloud.point.positions.numpy(), dtype=np.float64)
+            return np.zeros((0, 3), dtype=np.float32)
+        return np.asarray(cloud.point.positions.numpy(), dtype=np.float32)
 
     def mesh(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int32]]:
         """Marching-cubes mesh of the fused surface: (V, 3) vertices and (F, 3) triangles."""

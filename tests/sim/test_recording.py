@@ -9,7 +9,7 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from sim.recording import FORMAT, VERSION, Recording, RecordingError, RecordingWriter
+from sim.recording import FORMAT, VERSION, Recording, RecordingError, RecordingWriter, thinned
 
 SHAPE = (4, 3, 2)
 HEADER = {
@@ -223,3 +223,32 @@ def test_garbage_and_missing_files_raise(tmp_path: Path) -> None:
     with pytest.raises(RecordingError):
         Recording(tmp_path / "does_not_exist.npz")
     assert issubclass(RecordingError, ValueError)
+
+
+def _thinned_whole(points: np.ndarray, voxel_m: float) -> np.ndarray:
+    """The thinning as one computation over the whole cloud (the reference)."""
+    pts = np.asarray(points, dtype=np.float64)
+    cells = np.floor(pts / voxel_m).astype(np.int64)
+    cells -= cells.min(axis=0)
+    span = cells.max(axis=0) + 1
+    keys = (cells[:, 0] * span[1] + cells[:, 1]) * span[2] + cells[:, 2]
+    _, first = np.unique(keys, return_index=True)
+    return pts[np.sort(first)].astype(np.float32)
+
+
+@pytest.mark.parametrize("chunk", [1, 7, 1000, 1 << 20])
+def test_snapshots_thinned_in_chunks_are_thinned_as_a_whole(chunk: int) -> None:
+
+    rng = np.random.default_rng(5)
+    # float32 points, as the TSDF gives them, many on cell faces and many sharing a cell.
+    points = np.concatenate([
+        rng.uniform(-3.0, 7.0, size=(3000, 3)),
+        np.round(rng.uniform(-3.0, 7.0, size=(2000, 3)), 1),
+        np.repeat(rng.uniform(0.0, 1.0, size=(50, 3)), 20, axis=0),
+    ]).astype(np.float32)
+    rng.shuffle(points)
+    got = thinned(points, 0.1, chunk)
+    assert got.dtype == np.float32
+    np.testing.assert_array_equal(got, _thinned_whole(points, 0.1))
+    assert len(got) < len(points)
+    assert len(thinned(points[:0], 0.1, chunk)) == 0
