@@ -48,7 +48,7 @@ def _recording_name(planner: str, area: str, seed: int) -> str:
     return f"{area}--{planner}--s{seed}.npz"
 
 
-def _area(name: str) -> Area:
+def sweep_area(name: str) -> Area:
     """A registered area, or `NAME@SEED`: built-in area NAME generated with layout SEED (a
     layout like the held-out split's, from a seed of the caller's choosing)."""
     from areas import load_area
@@ -71,7 +71,7 @@ def _run(planner: str, area_name: str, seed: int, seconds: float | None, benchma
     from sim.episode import run_episode
     from sim.metrics import timing_summary
 
-    area = _area(area_name)
+    area = sweep_area(area_name)
     truth = load_ground_truth(area)
     planner_id = spec(planner).id
     wall0 = time.perf_counter()
@@ -108,7 +108,7 @@ def _rescore(runs: list[dict[str, Any]], recordings: Path) -> None:
         path = recordings / run["recording"]
         if not path.exists():
             continue
-        area = _area(run["area"])
+        area = sweep_area(run["area"])
         truth = load_ground_truth(area)
         rec = Recording(path)
         known = rec.map_state_at(float("inf")) != 0
@@ -116,11 +116,11 @@ def _rescore(runs: list[dict[str, Any]], recordings: Path) -> None:
         run["coverage"] = float(seen) / max(1, int(np.count_nonzero(truth.observable)))
 
 
-def stored_runs(benchmark: str) -> list[dict[str, Any]]:
-    """The runs of `benchmark` stored in `LOG` (none before the first sweep)."""
-    if not LOG.exists():
+def stored_runs(benchmark: str, log: Path = LOG) -> list[dict[str, Any]]:
+    """The runs of `benchmark` stored in `log` (none before the first sweep)."""
+    if not log.exists():
         return []
-    runs = [json.loads(line) for line in LOG.read_text().splitlines() if line.strip()]
+    runs = [json.loads(line) for line in log.read_text().splitlines() if line.strip()]
     return [r for r in runs if r["benchmark"] == benchmark]
 
 
@@ -180,7 +180,7 @@ def main() -> None:
                 (args.planners.split(",") if args.planners else _default_planners())]
     areas = [a.strip() for a in args.areas.split(",")] if args.areas else area_names()
     for name in areas:
-        _area(name)  # an unknown name fails here, before anything flies
+        sweep_area(name)  # an unknown name fails here, before anything flies
     seeds = [int(s) for s in args.seeds.split(",")]
     args.recordings.mkdir(parents=True, exist_ok=True)
     have = {_key(r) for r in done}

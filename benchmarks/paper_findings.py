@@ -109,6 +109,7 @@ def sweep_runs(path: Path, benchmark: str | None) -> list[dict[str, Any]]:
     """The runs of a crash sweep's log (`benchmarks/crash_sweep.py`) that this comparison can
     use: benchmark `benchmark` (default: this tree's), the paper's areas, and per planner
     family of the paper the version its name resolves to now (the leaderboard's default)."""
+    from benchmarks.crash_sweep import stored_runs
     from flybo.versions import benchmark_version
     from planners.registry import UnknownPlannerError, spec
 
@@ -119,8 +120,7 @@ def sweep_runs(path: Path, benchmark: str | None) -> list[dict[str, Any]]:
             latest[name] = spec(name).id
         except UnknownPlannerError:
             continue
-    runs = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    chosen = [r for r in runs if r.get("benchmark") == wanted and r["area"] in AREAS
+    chosen = [r for r in stored_runs(wanted, path) if r["area"] in AREAS
               and r["planner"] == latest.get(family(r["planner"]))]
     if not chosen:
         raise SystemExit(f"{path}: no run of benchmark {wanted} by "

@@ -90,14 +90,14 @@ def main() -> None:
         raise SystemExit("--interval and --band must be positive")
 
     from areas import load_ground_truth
-    from benchmarks.crash_sweep import _area
+    from benchmarks.crash_sweep import sweep_area
     from sim.recording import Recording, RecordingError
 
     try:
         rec = Recording(args.recording)
     except (RecordingError, FileNotFoundError) as exc:
         raise SystemExit(str(exc)) from None
-    area = _area(args.area or rec.header["area"])
+    area = sweep_area(args.area or rec.header["area"])
     if tuple(rec.header["grid_shape"]) != tuple(area.grid_shape):
         raise SystemExit(f"{args.recording}: its grid {rec.header['grid_shape']} is not area "
                          f"{area.name!r}'s {list(area.grid_shape)}; name the area with --area")

@@ -238,7 +238,6 @@ def _thinned_whole(points: np.ndarray, voxel_m: float) -> np.ndarray:
 
 @pytest.mark.parametrize("chunk", [1, 7, 1000, 1 << 20])
 def test_snapshots_thinned_in_chunks_are_thinned_as_a_whole(chunk: int) -> None:
-
     rng = np.random.default_rng(5)
     # float32 points, as the TSDF gives them, many on cell faces and many sharing a cell.
     points = np.concatenate([
