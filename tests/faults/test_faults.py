@@ -15,7 +15,11 @@ Stack = Any  # tests/faults/conftest.py: API and worker processes on PostgreSQL 
 
 
 def _exactly_one_result_each(stack: Stack, job: dict[str, Any]) -> None:
-    assert job["status"] == "succeeded", stack.tail()
+    if job["status"] != "succeeded":
+        runs = [stack.get(f"/runs/{r['id']}") for r in job["runs"]]
+        ended = [(r["id"], r["status"], r["attempts"], r.get("error")) for r in runs
+                 if r["status"] != "succeeded"]
+        raise AssertionError(f"job {job['id']} {job['status']}: {ended}\n{stack.tail()}")
     ids = ",".join(str(r["id"]) for r in job["runs"])
     assert stack.count(f"SELECT count(*) FROM run_results WHERE run_id IN ({ids})") \
         == len(job["runs"])
