@@ -16,7 +16,7 @@ from planners.aep import Aep, AepV1, AepV3
 from planners.api import Planner
 from planners.classic import Classic, ClassicV2
 from planners.esm import EsmRecon, EsmV1
-from planners.esm_horizon import EsmHorizon, EsmReconHorizon
+from planners.esm_horizon import EsmHorizon, EsmHorizonV3, EsmReconHorizon, EsmReconHorizonV3
 from planners.falcon import Falcon, FalconV2
 from planners.fuel import Fuel, FuelV2
 from planners.nbvp import Nbvp
@@ -123,6 +123,17 @@ BUILTINS: tuple[tuple[str, int, type[Planner], str, str], ...] = (
         "esm-recon", 2, EsmReconHorizon,
         "As esm-recon-v1, with esm-ipp-v2's local horizon, minimum segment length and "
         "large-area tree.",
+        _ESM_REFERENCE,
+    ),
+    (
+        "esm-ipp", 3, EsmHorizonV3,
+        "As esm-ipp-v2, and outdoor areas (the area's class in the planner's context) grow "
+        "the large-area tree too, as the FLYBO authors' PLATFORM A configuration does.",
+        _ESM_REFERENCE,
+    ),
+    (
+        "esm-recon", 3, EsmReconHorizonV3,
+        "As esm-recon-v2, with esm-ipp-v3's large-area tree on outdoor areas.",
         _ESM_REFERENCE,
     ),
     (

@@ -1,4 +1,4 @@
-"""ESM with the original's local horizon: `esm-ipp-v2` and `esm-recon-v2`.
+"""ESM with the original's local horizon: `esm-ipp-v2`, `esm-recon-v2` and their v3.
 
 `planners.esm.Esm` (v1) with four changes, each the authors' public code or the FLYBO authors'
 configuration of it (`planners.esm_horizon_config`):
@@ -11,7 +11,8 @@ configuration of it (`planners.esm_horizon_config`):
 - **Minimum segment length.** The original's `connectPoses` refuses a segment shorter than
   `min_path_length`, for a new node and for the RRT* rewiring alike (`min_segment_m`).
 - **The large-area tree.** On areas mapped at 0.2 m the tree of the FLYBO authors' WAREHOUSE and
-  POWERPLANT configuration: 3 m segments, 2 m density, a 6 m update range.
+  POWERPLANT configuration: 3 m segments, 2 m density, a 6 m update range. v3 grows it on
+  outdoor areas too, as the FLYBO authors did on PLATFORM A.
 - **Nearest-node queries by k-d tree.** Sampling looks up nearest nodes in a k-d tree built once
   per call (the original keeps a nanoflann k-d tree of the segments), so a try costs O(log N)
   instead of a pass over every node.
@@ -27,7 +28,12 @@ from scipy.spatial import cKDTree
 
 from planners.api import Observation, Plan, PlannerContext
 from planners.esm import Esm
-from planners.esm_horizon_config import EsmHorizonConfig, EsmReconHorizonConfig
+from planners.esm_horizon_config import (
+    EsmHorizonConfig,
+    EsmHorizonV3Config,
+    EsmReconHorizonConfig,
+    EsmReconHorizonV3Config,
+)
 from planners.segment_tree import BoolArray, SegmentTree
 from sim.map_view import MapView
 
@@ -76,6 +82,7 @@ class EsmHorizon(Esm):
 
     def reset(self, ctx: PlannerContext) -> None:
         super().reset(ctx)
+        self._indoor = ctx.indoor
         self._resolved = False
         self._index: NodeIndex | None = None
         self._expanding = False
@@ -83,7 +90,7 @@ class EsmHorizon(Esm):
     def plan(self, obs: Observation) -> Plan:
         if not self._resolved:
             # The map's voxel size is known from the first observation on.
-            self.config = self.config.for_voxel(obs.map.voxel_size)
+            self.config = self.config.for_area(obs.map.voxel_size, self._indoor)
             self._resolved = True
         return super().plan(obs)
 
@@ -145,3 +152,17 @@ class EsmReconHorizon(EsmHorizon):
     """ESM-Recon with the local horizon: `EsmHorizon` with the reconstruction gain."""
 
     config_model = EsmReconHorizonConfig
+
+
+class EsmHorizonV3(EsmHorizon):
+    """`esm-ipp-v3`: `EsmHorizon` with the large-area tree on outdoor areas too."""
+
+    config_model = EsmHorizonV3Config
+    config: EsmHorizonV3Config
+
+
+class EsmReconHorizonV3(EsmHorizonV3):
+    """`esm-recon-v3`: `EsmHorizonV3` with the reconstruction gain (as `EsmReconHorizon`)."""
+
+    config_model = EsmReconHorizonV3Config
+    config: EsmReconHorizonV3Config

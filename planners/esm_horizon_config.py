@@ -59,24 +59,50 @@ class EsmHorizonConfig(EsmConfig):
     # The benchmark maps WAREHOUSE, PLATFORM B and POWERPLANT at 0.2 m and the others at 0.1 m
     # (the FLYBO paper's resolutions), and the FLYBO authors ran ESM with their large-area
     # configuration on WAREHOUSE, PLATFORM A and POWERPLANT: the voxel size is what a planner
-    # can tell of it. PLATFORM A (0.1 m) flies the indoor tree (docs/planners/esm.md).
+    # can tell of it. PLATFORM A (0.1 m) flies the indoor tree (docs/planners/esm.md); v3
+    # (`EsmHorizonV3Config`) also reads the area's indoor / outdoor class.
     large_area_voxel_m: float | None = Field(0.2, gt=0.0)
     large: EsmLargeArea = EsmLargeArea()
-    # Which settings apply: "auto" by `large_area_voxel_m`, or one of the two everywhere.
+    # Which settings apply: "auto" by `large_tree_auto`, or one of the two everywhere.
     profile: Literal["auto", "indoor", "large"] = "auto"
 
-    def for_voxel(self, voxel_size: float) -> EsmHorizonConfig:
-        """The settings that apply on a map of `voxel_size`: the large-area tree's in place of
-        the others where `profile` (or, for "auto", `large_area_voxel_m`) says so."""
+    def for_area(self, voxel_size: float, indoor: bool) -> EsmHorizonConfig:
+        """The settings that apply on a map of `voxel_size` of an area of that class: the
+        large-area tree's in place of the others where `profile` (or, for "auto",
+        `large_tree_auto`) says so."""
         large = self.profile == "large" or (
-            self.profile == "auto" and self.large_area_voxel_m is not None
-            and voxel_size >= self.large_area_voxel_m - 1e-9)
+            self.profile == "auto" and self.large_tree_auto(voxel_size, indoor))
         if not large:
             return self
         return self.model_copy(update=self.large.model_dump())
 
+    def large_tree_auto(self, voxel_size: float, indoor: bool) -> bool:
+        """Whether "auto" grows the large-area tree: by the voxel size alone."""
+        return (self.large_area_voxel_m is not None
+                and voxel_size >= self.large_area_voxel_m - 1e-9)
+
+
+class EsmHorizonV3Config(EsmHorizonConfig):
+    """`EsmHorizonConfig`, and the large-area tree on every outdoor area."""
+
+    # The FLYBO authors ran their large-area configuration on PLATFORM A too (`platform_a.yaml`:
+    # the tree of `warehouse.yaml`, crops 1.5 / 1.8 m), an outdoor area mapped at 0.1 m. With
+    # the area's class in the planner's context, "auto" follows them: outdoors, or mapped at
+    # `large_area_voxel_m` or coarser. (Their PLATFORM A crops are not taken: one large-area
+    # tree for every area, docs/planners/esm.md.)
+    large_outdoors: bool = True
+
+    def large_tree_auto(self, voxel_size: float, indoor: bool) -> bool:
+        return (self.large_outdoors and not indoor) or super().large_tree_auto(voxel_size, indoor)
+
 
 class EsmReconHorizonConfig(EsmHorizonConfig):
     """ESM-Recon with the local horizon: the reconstruction gain."""
+
+    gain: Literal["volumetric", "reconstruction"] = "reconstruction"
+
+
+class EsmReconHorizonV3Config(EsmHorizonV3Config):
+    """ESM-Recon v3: `EsmHorizonV3Config` with the reconstruction gain."""
 
     gain: Literal["volumetric", "reconstruction"] = "reconstruction"

@@ -156,7 +156,7 @@ class EpisodeLoop:
             area=a.name, bounds_min=a.bounds_min.copy(), bounds_max=a.bounds_max.copy(),
             start=Pose(a.start.position.copy(), a.start.yaw), limits=self.cfg.limits,
             safety_radius_m=self.cfg.safety_radius_m, camera=self.cfg.camera,
-            rng=self.streams.planner,
+            rng=self.streams.planner, indoor=a.info.indoor,
         )
 
     def _fly(self, rest: npt.NDArray[np.float64]) -> Generator[PlanRequest, PlanReply, Ending]:

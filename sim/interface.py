@@ -45,6 +45,9 @@ class PlannerContext:
             odometry drift); the map's traversable mask uses it.
         camera: depth camera model.
         rng: the planner's own seeded generator; the only randomness a planner may use.
+        indoor: the area's indoor / outdoor class (the FLYBO paper's Table 1 column; an imported
+            area's from its geometry, `areas.auto_start`), which a planner may choose its
+            settings by, as the FLYBO authors chose theirs per area.
     """
 
     area: str
@@ -55,6 +58,7 @@ class PlannerContext:
     safety_radius_m: float
     camera: CameraConfig
     rng: np.random.Generator
+    indoor: bool = True
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""esm-ipp-v2 / esm-recon-v2: the local gain horizon, the minimum segment length, the
+"""esm-ipp-v2 / esm-recon-v2 and their v3: the local gain horizon, the minimum segment length, the
 large-area tree and the k-d tree of nodes, on hand-made maps and trees."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 
 from planners.esm_config import EsmConfig
 from planners.esm_horizon import EsmHorizon, NodeIndex
-from planners.esm_horizon_config import EsmHorizonConfig, EsmLargeArea
+from planners.esm_horizon_config import EsmHorizonConfig, EsmHorizonV3Config, EsmLargeArea
 from planners.registry import make, spec
 from planners.segment_tree import FlightTime, SegmentTree
 from sim.camera import CameraConfig
@@ -28,37 +28,66 @@ VOXEL = 0.1
 SHAPE = (60, 40, 25)
 
 
-def _context() -> PlannerContext:
+def _context(indoor: bool = True) -> PlannerContext:
     return PlannerContext(area="handmade", bounds_min=np.zeros(3),
                           bounds_max=np.array(SHAPE) * VOXEL, start=Pose(np.ones(3), 0.0),
                           limits=VehicleLimits(), safety_radius_m=0.45, camera=CameraConfig(),
-                          rng=np.random.default_rng(0))
+                          rng=np.random.default_rng(0), indoor=indoor)
 
 
 def test_registered_beside_v1_with_their_gains() -> None:
-    assert spec("esm-ipp").id == "esm-ipp-v2"
-    assert spec("esm-recon").id == "esm-recon-v2"
-    assert make("esm-ipp-v2").config.gain == "volumetric"  # type: ignore[attr-defined]
-    assert make("esm-recon-v2").config.gain == "reconstruction"  # type: ignore[attr-defined]
+    assert spec("esm-ipp").id == "esm-ipp-v3"
+    assert spec("esm-recon").id == "esm-recon-v3"
+    for version in (2, 3):
+        assert make(f"esm-ipp-v{version}").config.gain == "volumetric"  # type: ignore[attr-defined]
+        assert make(f"esm-recon-v{version}").config.gain == \
+            "reconstruction"  # type: ignore[attr-defined]
     assert type(make("esm-ipp-v1")).__name__ == "EsmV1"
 
 
 def test_the_large_area_tree_applies_on_coarse_maps_only() -> None:
     cfg = EsmHorizonConfig()
-    indoor = cfg.for_voxel(0.1)
+    indoor = cfg.for_area(0.1, indoor=True)
     assert indoor == cfg
     # Indoors the tree is the authors' exploration configuration, as in v1.
     v1 = EsmConfig()
     assert (indoor.extension_m, indoor.density_radius_m, indoor.local_count) == \
         (v1.extension_m, v1.density_radius_m, v1.local_count)
-    large = cfg.for_voxel(0.2)
+    large = cfg.for_area(0.2, indoor=True)
     for key, value in EsmLargeArea().model_dump().items():
         assert getattr(large, key) == value
     assert large.extension_m == 3.0 and large.update_range_m == 6.0
     assert large.gain == cfg.gain and large.min_value == cfg.min_value  # the rest is kept
-    assert EsmHorizonConfig(profile="indoor").for_voxel(0.2).extension_m == v1.extension_m
-    assert EsmHorizonConfig(profile="large").for_voxel(0.1).extension_m == 3.0
-    assert EsmHorizonConfig(large_area_voxel_m=None).for_voxel(0.4).extension_m == 1.5
+    assert EsmHorizonConfig(profile="indoor").for_area(0.2, True).extension_m == v1.extension_m
+    assert EsmHorizonConfig(profile="large").for_area(0.1, True).extension_m == 3.0
+    assert EsmHorizonConfig(large_area_voxel_m=None).for_area(0.4, True).extension_m == 1.5
+    # v2 tells areas apart by their voxel size alone.
+    assert cfg.for_area(0.1, indoor=False) == cfg
+
+
+def test_v3_grows_the_large_area_tree_outdoors_at_any_voxel_size() -> None:
+    cfg = EsmHorizonV3Config()
+    assert cfg.for_area(0.1, indoor=True).extension_m == 1.5
+    assert cfg.for_area(0.1, indoor=False).extension_m == 3.0
+    assert cfg.for_area(0.2, indoor=True).extension_m == 3.0
+    assert EsmHorizonV3Config(large_outdoors=False).for_area(0.1, indoor=False).extension_m == 1.5
+    assert EsmHorizonV3Config(profile="indoor").for_area(0.2, indoor=False).extension_m == 1.5
+    # Beyond the tree, v3 is v2.
+    v2 = EsmHorizonConfig().model_dump()
+    assert {k: v for k, v in cfg.model_dump().items() if k != "large_outdoors"} == v2
+
+
+@pytest.mark.parametrize(("name", "indoor", "extension"), [
+    ("esm-ipp-v2", False, 1.5), ("esm-ipp-v3", True, 1.5), ("esm-ipp-v3", False, 3.0),
+    ("esm-recon-v3", False, 3.0),
+])
+def test_the_planner_reads_the_area_class_from_its_context(name: str, indoor: bool,
+                                                            extension: float) -> None:
+    planner = make(name)
+    planner.reset(_context(indoor))
+    here = np.array([2.0, 2.0, 1.25])
+    planner.plan(Observation(0.0, Pose(here, 0.0), np.zeros(3), _open_view(), PlanOutcome.NONE))
+    assert planner.config.extension_m == extension  # type: ignore[attr-defined]
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

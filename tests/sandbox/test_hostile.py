@@ -192,11 +192,13 @@ def test_the_context_sent_hides_the_area_only() -> None:
     from worker.sandbox.protocol import HIDDEN_AREA, decode_context, encode_context, hide_area
 
     ctx = PlannerContext("maze", np.zeros(3), np.ones(3), Pose(np.zeros(3), 0.0),
-                         VehicleLimits(), 0.4, CameraConfig(), np.random.default_rng(3))
+                         VehicleLimits(), 0.4, CameraConfig(), np.random.default_rng(3),
+                         indoor=False)
     sent = decode_context(encode_context(hide_area(ctx)))
     assert sent.area == HIDDEN_AREA and "maze" not in repr(encode_context(hide_area(ctx)))
     assert sent.rng.random() == replace(ctx, rng=np.random.default_rng(3)).rng.random()
     assert sent.safety_radius_m == ctx.safety_radius_m and sent.limits == ctx.limits
+    assert sent.indoor is False  # the area's class is told, its name is not
 
 
 # Reopens its input pipe for writing (through libc: the audit hook is no boundary), fills it,
