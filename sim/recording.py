@@ -25,14 +25,29 @@ class RecordingError(ValueError):
     """The file is not a recording this version can read."""
 
 
-def _flatten(items: list[np.ndarray], dtype: npt.DTypeLike, width: int | None) -> tuple[
-    np.ndarray, np.ndarray
-]:
-    shape: tuple[int, ...] = (0,) if width is None else (0, width)
-    flat = np.concatenate(items).astype(dtype) if items else np.zeros(shape, dtype=dtype)
+def _offsets(items: list[np.ndarray]) -> npt.NDArray[np.int64]:
+    """(K + 1,) start of each item in the flat sequence, and its end."""
     offsets = np.zeros(len(items) + 1, dtype=np.int64)
     offsets[1:] = np.cumsum([len(i) for i in items]) if items else []
-    return flat, offsets
+    return offsets
+
+
+def _write_array(archive: zipfile.ZipFile, name: str, array: np.ndarray) -> None:
+    with archive.open(f"{name}.npy", "w", force_zip64=True) as fh:
+        np.lib.format.write_array(fh, np.asanyarray(array), allow_pickle=False)
+
+
+def _write_flat(archive: zipfile.ZipFile, name: str, items: list[np.ndarray],
+                dtype: npt.DTypeLike, width: int | None) -> None:
+    """The items one after another as one array, written item by item: a run's keyframes and
+    snapshots are never concatenated in memory (hundreds of MiB on a large area)."""
+    total = sum(len(i) for i in items)
+    header = {"descr": np.lib.format.dtype_to_descr(np.dtype(dtype)), "fortran_order": False,
+              "shape": (total,) if width is None else (total, width)}
+    with archive.open(f"{name}.npy", "w", force_zip64=True) as fh:
+        np.lib.format.write_array_header_1_0(fh, header)
+        for item in items:
+            fh.write(np.ascontiguousarray(item, dtype=dtype).tobytes())
 
 
 def thinned(points: np.ndarray, voxel_m: float, chunk: int = 1 << 20) -> np.ndarray:
@@ -103,28 +118,31 @@ class RecordingWriter:
         self._surfaces.append(thinned(np.asarray(points), voxel_m).astype(np.float32, copy=False))
 
     def save(self, path: Path) -> None:
-        key_idx, key_off = _flatten(self._key_indices, np.uint32, None)
-        key_state, _ = _flatten(self._key_states, np.uint8, None)
-        plans, plan_off = _flatten(self._plans, np.float32, 4)
-        surf, surf_off = _flatten(self._surfaces, np.float32, 3)
+        """Write the archive (what `np.savez_compressed` writes), one array at a time."""
         header = {**self.header, "format": FORMAT, "version": VERSION}
-        with path.open("wb") as fh:
-            np.savez_compressed(
-                fh,
-                header=np.array(json.dumps(header)),
-                pose_times=np.array(self._pose_times, dtype=np.float64),
-                poses=np.array(self._poses, dtype=np.float32).reshape(-1, 4),
-                keyframe_times=np.array(self._key_times, dtype=np.float64),
-                keyframe_offsets=key_off,
-                keyframe_indices=key_idx,
-                keyframe_states=key_state,
-                plan_times=np.array(self._plan_times, dtype=np.float64),
-                plan_offsets=plan_off,
-                plan_waypoints=plans,
-                surface_times=np.array(self._surface_times, dtype=np.float64),
-                surface_offsets=surf_off,
-                surface_points=surf,
-            )
+        small = {
+            "header": np.array(json.dumps(header)),
+            "pose_times": np.array(self._pose_times, dtype=np.float64),
+            "poses": np.array(self._poses, dtype=np.float32).reshape(-1, 4),
+            "keyframe_times": np.array(self._key_times, dtype=np.float64),
+            "keyframe_offsets": _offsets(self._key_indices),
+            "plan_times": np.array(self._plan_times, dtype=np.float64),
+            "plan_offsets": _offsets(self._plans),
+            "surface_times": np.array(self._surface_times, dtype=np.float64),
+            "surface_offsets": _offsets(self._surfaces),
+        }
+        flat: dict[str, tuple[list[np.ndarray], npt.DTypeLike, int | None]] = {
+            "keyframe_indices": (self._key_indices, np.uint32, None),
+            "keyframe_states": (self._key_states, np.uint8, None),
+            "plan_waypoints": (self._plans, np.float32, 4),
+            "surface_points": (self._surfaces, np.float32, 3),
+        }
+        with zipfile.ZipFile(path, mode="w", compression=zipfile.ZIP_DEFLATED,
+                             allowZip64=True) as archive:
+            for name, array in small.items():
+                _write_array(archive, name, array)
+            for name, (items, dtype, width) in flat.items():
+                _write_flat(archive, name, items, dtype, width)
 
 
 class Recording:

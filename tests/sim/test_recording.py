@@ -251,3 +251,38 @@ def test_snapshots_thinned_in_chunks_are_thinned_as_a_whole(chunk: int) -> None:
     np.testing.assert_array_equal(got, _thinned_whole(points, 0.1))
     assert len(got) < len(points)
     assert len(thinned(points[:0], 0.1, chunk)) == 0
+
+
+def test_the_archive_holds_the_sequences_as_if_concatenated(tmp_path: Path) -> None:
+    """`save` writes each flat sequence item by item; the arrays read back are those of one
+    concatenation, with the dtypes and shapes of the format (`docs/recording.md`)."""
+    rng = np.random.default_rng(4)
+    writer = RecordingWriter(header=dict(HEADER))
+    surfaces = [rng.uniform(0.0, 9.0, (n, 3)) for n in (0, 40, 7)]
+    plans = [rng.uniform(0.0, 9.0, (n, 4)) for n in (3, 1)]
+    for i, points in enumerate(surfaces):
+        writer.surface(float(i), points, 0.05)
+    for i, plan in enumerate(plans):
+        writer.plan(float(i), plan)
+    states = keyframe_states()
+    for i, state in enumerate(states):
+        writer.map_keyframe(float(i), state)
+    path = tmp_path / "r.npz"
+    writer.save(path)
+    with np.load(path, allow_pickle=False) as data:
+        arrays = {k: data[k] for k in data.files}
+    expected_surface = np.concatenate([thinned(p, 0.05) for p in surfaces]).astype(np.float32)
+    np.testing.assert_array_equal(arrays["surface_points"], expected_surface)
+    assert arrays["surface_points"].dtype == np.float32
+    np.testing.assert_array_equal(arrays["plan_waypoints"],
+                                  np.concatenate(plans).astype(np.float32))
+    assert arrays["plan_offsets"].tolist() == [0, 3, 4]
+    assert arrays["keyframe_indices"].dtype == np.uint32
+    assert arrays["keyframe_states"].dtype == np.uint8
+    assert len(arrays["keyframe_indices"]) == arrays["keyframe_offsets"][-1]
+    assert sorted(arrays) == sorted([
+        "header", "pose_times", "poses", "keyframe_times", "keyframe_offsets",
+        "keyframe_indices", "keyframe_states", "plan_times", "plan_offsets", "plan_waypoints",
+        "surface_times", "surface_offsets", "surface_points"])
+    replayed = Recording(path)
+    np.testing.assert_array_equal(replayed.map_state_at(10.0), states[-1])
