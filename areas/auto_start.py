@@ -10,7 +10,12 @@ the largest set of traversable voxels the vehicle can fly between, at the voxel 
 largest distance to the mesh and to the grid's faces, among those 1-2 m above the floor below
 them and within `START_REACH` of the mesh (so the camera sees the structure from the first
 frame) where any are, else among all. Yaw 0. The component's volume, the vehicle's reachable
-volume and its distinct floor heights (levels) come with the start.
+volume and its distinct floor heights (levels) come with the start, and the area's indoor /
+outdoor class: indoor when at least `INDOOR_MIN_COVERED` of the space the vehicle reaches has
+a surface somewhere above it (a roof, a ceiling, a deck), outdoor otherwise. On the built-in
+areas this gives Table 1's class for every one (indoors all of the reachable space is covered;
+PLATFORM A 47 %, PLATFORM B 36 %, POWERPLANT under 1 %), and a building with an open door or
+window stays indoor.
 
 A mesh whose openings are all narrower than the vehicle leaves it almost no reachable space:
 `choose_start` refuses it (`MIN_REACHABLE_M3`), saying so, rather than giving an area no run
@@ -40,6 +45,7 @@ START_REACH = 4.0
 MIN_REACHABLE_M3 = 2.0
 PREFERRED_HEIGHT = (1.0, 2.0)  # metres above the floor below the start
 INDOOR_MIN_FRACTION = 0.25  # of the largest component's volume, for an inside to be chosen
+INDOOR_MIN_COVERED = 0.5  # of the reachable volume under a surface, for an area to be indoor
 EXACT_CANDIDATES = 20_000  # voxels whose exact clearance is computed
 STOREY_MIN_GAP = 2.0  # metres between two floor heights counted as distinct levels
 STOREY_MIN_FRACTION = 0.25  # of the largest floor area, for a floor height to count as a level
@@ -102,8 +108,19 @@ def choose_start(area: Area) -> AutoStart:
         volume_m3=free_m3,
         reachable_volume_m3=reachable_m3,
         levels=_count_levels(component, blocked, vs),
-        indoor=not bool(touching[chosen]),
+        indoor=covered_fraction(blocked, reachable) >= INDOOR_MIN_COVERED,
     )
+
+
+def covered_fraction(blocked: BoolArray, space: BoolArray) -> float:
+    """The share of the voxels of `space` that have a blocked voxel somewhere above them (+z)."""
+    if not space.any():
+        return 0.0
+    # Blocked at or above each voxel, then shifted down one: blocked strictly above.
+    at_or_above = np.flip(np.logical_or.accumulate(np.flip(blocked, axis=2), axis=2), axis=2)
+    above = np.zeros_like(blocked)
+    above[:, :, :-1] = at_or_above[:, :, 1:]
+    return float(np.count_nonzero(above & space)) / float(np.count_nonzero(space))
 
 
 def _largest_component(mask: BoolArray, structure: npt.NDArray[np.bool_]) -> BoolArray:

@@ -15,6 +15,7 @@ import pytest
 import trimesh
 
 from areas.area import Area, StartPose
+from areas.auto_start import covered_fraction
 from areas.ground_truth import compute_ground_truth
 from areas.importer import ImportLimits, MeshImportError, import_mesh
 
@@ -250,3 +251,38 @@ def test_the_start_sees_structure_and_the_vehicle_can_fly_from_it(tmp_path: Path
     ijk = tuple(((area.start.position - area.bounds_min) / area.voxel_size).astype(int))
     walkable = traversable(blocked_voxels(area), area.voxel_size, ViewModel().safety_radius_m)
     assert walkable[ijk]
+
+
+def test_an_area_is_indoor_when_most_of_the_reachable_space_is_under_a_surface() -> None:
+    blocked = np.zeros((10, 10, 6), dtype=bool)
+    space = np.zeros_like(blocked)
+    space[1:9, 1:9, 1:4] = True
+    assert covered_fraction(blocked, space) == 0.0  # open sky
+    blocked[1:9, 1:5, 5] = True  # a roof over half of it
+    assert covered_fraction(blocked, space) == pytest.approx(0.5)
+    blocked[:, :, 5] = True
+    assert covered_fraction(blocked, space) == 1.0
+    blocked[1:9, 1:9, 2] = True  # a deck inside: the space above it is under the roof still
+    assert covered_fraction(blocked, space & ~blocked) == 1.0
+    assert covered_fraction(blocked, np.zeros_like(blocked)) == 0.0
+
+
+def test_a_roofed_room_with_an_open_door_is_indoor_and_a_roofless_one_outdoor(
+        tmp_path: Path) -> None:
+    floor = trimesh.creation.box(extents=(6.0, 6.0, 0.2))
+    walls = []
+    for x, y, ex, ey in ((3.0, 0.0, 0.2, 6.0), (-3.0, 0.0, 0.2, 6.0), (0.0, -3.0, 6.0, 0.2)):
+        wall = trimesh.creation.box(extents=(ex, ey, 3.0))
+        wall.apply_translation((x, y, 1.5))
+        walls.append(wall)
+    for x in (-2.0, 2.0):  # the fourth wall with a 2 m door between x = -1 and 1
+        wall = trimesh.creation.box(extents=(2.0, 0.2, 3.0))
+        wall.apply_translation((x, 3.0, 1.5))
+        walls.append(wall)
+    roof = trimesh.creation.box(extents=(6.2, 6.2, 0.2))
+    roof.apply_translation((0.0, 0.0, 3.1))
+    for name, parts in (("roofed", [floor, *walls, roof]), ("roofless", [floor, *walls])):
+        path = tmp_path / f"{name}.ply"
+        trimesh.util.concatenate(parts).export(path)
+        area = import_mesh(path, name)
+        assert area.info.indoor == (name == "roofed"), name

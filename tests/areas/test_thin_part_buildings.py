@@ -45,7 +45,7 @@ class Building:
     extent: tuple[float, float, float]  # metres, of the vertices
     faces: int  # after the importer drops degenerate faces
     min_reachable_m3: float
-    indoor: bool  # whether the start's free space is closed (the bookstore's entrance is open)
+    indoor: bool  # whether the space the vehicle reaches is under a roof (areas/auto_start.py)
     thin_parts: tuple[ThinPart, ...]
     one_sided: ThinPart  # a surface voxel seen from one side only: not a thin part
 
@@ -64,7 +64,7 @@ SMALL_HOUSE = Building(
     ThinPart("outer wall", (-9.45, 0.05, 1.25), (0,)),
 )
 BOOKSTORE = Building(
-    "bookstore.ply", "bookstore", (15.7, 14.61, 3.72), 118_189, 250.0, False,
+    "bookstore.ply", "bookstore", (15.7, 14.61, 3.72), 118_189, 250.0, True,
     (
         ThinPart("tube of a bar chair (3.3 cm)", (-4.75, 5.05, 0.45), (0, 1)),
         ThinPart("another tube of that chair", (-4.65, 4.85, 0.45), (0, 1)),
