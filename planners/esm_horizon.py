@@ -21,6 +21,7 @@ configuration of it (`planners.esm_horizon_config`):
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -74,10 +75,11 @@ class NodeIndex:
         return float(np.linalg.norm(positions[near[0]] - point)) if len(near) else math.inf
 
 
-class EsmHorizon(Esm):
-    """ESM with the original's local gain updates and minimum segment length (module doc)."""
+class EsmHorizonPlanner(Esm):
+    """ESM with the original's local gain updates and minimum segment length (module doc): the
+    code of v2 and v3, whose config models pick the version."""
 
-    config_model = EsmHorizonConfig
+    config_model: ClassVar[type[EsmHorizonConfig]] = EsmHorizonConfig
     config: EsmHorizonConfig
 
     def reset(self, ctx: PlannerContext) -> None:
@@ -148,21 +150,23 @@ class EsmHorizon(Esm):
         return near
 
 
-class EsmReconHorizon(EsmHorizon):
-    """ESM-Recon with the local horizon: `EsmHorizon` with the reconstruction gain."""
+class EsmHorizon(EsmHorizonPlanner):
+    """`esm-ipp-v2`."""
+
+
+class EsmReconHorizon(EsmHorizonPlanner):
+    """`esm-recon-v2`: ESM-Recon with the local horizon, the reconstruction gain."""
 
     config_model = EsmReconHorizonConfig
 
 
-class EsmHorizonV3(EsmHorizon):
-    """`esm-ipp-v3`: `EsmHorizon` with the large-area tree on outdoor areas too."""
+class EsmHorizonV3(EsmHorizonPlanner):
+    """`esm-ipp-v3`: v2 with the large-area tree on outdoor areas too."""
 
     config_model = EsmHorizonV3Config
-    config: EsmHorizonV3Config
 
 
-class EsmReconHorizonV3(EsmHorizonV3):
-    """`esm-recon-v3`: `EsmHorizonV3` with the reconstruction gain (as `EsmReconHorizon`)."""
+class EsmReconHorizonV3(EsmHorizonPlanner):
+    """`esm-recon-v3`: `esm-ipp-v3`'s tree with the reconstruction gain."""
 
     config_model = EsmReconHorizonV3Config
-    config: EsmReconHorizonV3Config
