@@ -29,6 +29,7 @@ from __future__ import annotations
 import logging
 import tempfile
 import time
+import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -131,10 +132,14 @@ def _fly_and_store(factory: sessionmaker[Session], settings: Settings, held: Cla
 
 def _fly_and_upload(settings: Settings, store: ArtifactStore, held: Claim, spec: RunSpec,
                     tmp: Path, run_log: RunLog, beat: Heartbeat) -> _Flown:
+    # First the speed factor: it waits for the measurement that the process started in a
+    # thread, so the thread's first imports of the simulation stack (numba) never run
+    # alongside this thread's own; two threads importing one stack at once can fail.
+    speed = machine_speed_factor()
     limit_open3d()  # before the first ray: Open3D's oneTBB reads no environment variable
     log.info("run %s %s", held.run_id, thread_report())
     area = load_run_area(spec, store, settings.areas_dir)
-    result = _simulate(spec, area, tmp, beat, store, settings)
+    result = _simulate(spec, area, tmp, beat, store, settings, speed)
     log.info("run %s %s: %s; coverage %.4f, F-score %.4f", held.run_id, result.status.value,
              result.reason, result.coverage, result.surface.fscore)
     record = build_record(spec, area, result)
@@ -174,12 +179,22 @@ def _failed(factory: sessionmaker[Session], settings: Settings, held: Claim, spe
         return "failed"
     log.error("run %s failed", held.run_id, exc_info=exc)
     finish(factory, held, RunState.FAILED, wall0, kind=FailureKind.PLATFORM,
-           error=f"{type(exc).__name__}: {exc}")
+           error=f"{type(exc).__name__}: {exc}{_raised_at(exc)}")
     return "failed"
 
 
+def _raised_at(exc: BaseException) -> str:
+    """' (at file:line in function)' of the innermost frame: a platform failure's error names
+    where it was raised, so a rare one is traced from the run's row alone."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    if not frames:
+        return ""
+    last = frames[-1]
+    return f" (at {Path(last.filename).name}:{last.lineno} in {last.name})"
+
+
 def _simulate(spec: RunSpec, area: Area, tmp: Path, beat: Heartbeat, store: ArtifactStore,
-              settings: Settings) -> EpisodeResult:
+              settings: Settings, speed: float | None) -> EpisodeResult:
     from areas import load_ground_truth  # the simulation stack, see load_run_area
     from planners.registry import make
     from sim.config import preset
@@ -197,8 +212,6 @@ def _simulate(spec: RunSpec, area: Area, tmp: Path, beat: Heartbeat, store: Arti
         if t - last_note[0] >= 30.0:
             last_note[0] = t
             log.info("t = %.0f s, explored %.1f m³", t, volume)
-
-    speed = machine_speed_factor()
 
     def fly(planner: PlannerLike) -> EpisodeResult:
         # Celery's soft time limit, raised inside a `plan` call, is the platform's: it ends the
