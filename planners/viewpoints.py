@@ -42,6 +42,26 @@ class Viewpoints:
 
 
 @numba.njit(cache=True)
+def _line_clear(blocked: BoolGrid, a: npt.NDArray[np.float64],
+                b: npt.NDArray[np.float64]) -> bool:
+    """Whether no voxel strictly between the end voxels of a→b (voxel units) is blocked."""
+    ai, aj, ak = int(np.floor(a[0])), int(np.floor(a[1])), int(np.floor(a[2]))
+    bi, bj, bk = int(np.floor(b[0])), int(np.floor(b[1])), int(np.floor(b[2]))
+    length = np.sqrt(np.sum((b - a) ** 2))
+    steps = max(1, int(np.ceil(length * 4.0)))
+    for s in range(1, steps):
+        t = s / steps
+        i = int(np.floor(a[0] + (b[0] - a[0]) * t))
+        j = int(np.floor(a[1] + (b[1] - a[1]) * t))
+        k = int(np.floor(a[2] + (b[2] - a[2]) * t))
+        if (i == ai and j == aj and k == ak) or (i == bi and j == bj and k == bk):
+            continue
+        if blocked[i, j, k]:
+            return False
+    return True
+
+
+@numba.njit(cache=True)
 def lines_clear(
     blocked: BoolGrid, a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]
 ) -> npt.NDArray[np.bool_]:
@@ -49,21 +69,62 @@ def lines_clear(
     voxels is blocked."""
     out = np.ones(a.shape[0], dtype=np.bool_)
     for r in range(a.shape[0]):
-        ai, aj, ak = int(np.floor(a[r, 0])), int(np.floor(a[r, 1])), int(np.floor(a[r, 2]))
-        bi, bj, bk = int(np.floor(b[r, 0])), int(np.floor(b[r, 1])), int(np.floor(b[r, 2]))
-        length = np.sqrt(np.sum((b[r] - a[r]) ** 2))
-        steps = max(1, int(np.ceil(length * 4.0)))
-        for s in range(1, steps):
-            t = s / steps
-            i = int(np.floor(a[r, 0] + (b[r, 0] - a[r, 0]) * t))
-            j = int(np.floor(a[r, 1] + (b[r, 1] - a[r, 1]) * t))
-            k = int(np.floor(a[r, 2] + (b[r, 2] - a[r, 2]) * t))
-            if (i == ai and j == aj and k == ak) or (i == bi and j == bj and k == bk):
-                continue
-            if blocked[i, j, k]:
-                out[r] = False
-                break
+        out[r] = _line_clear(blocked, a[r], b[r])
     return out
+
+
+@numba.njit(cache=True)
+def _sees_into_unknown(occupied: BoolGrid, state: npt.NDArray[np.uint8], unknown: int,
+                       eyes: npt.NDArray[np.float64],
+                       voxels: npt.NDArray[np.int64]) -> npt.NDArray[np.bool_]:
+    si, sj, sk = state.shape
+    seen = np.zeros(voxels.shape[0], dtype=np.bool_)
+    end = np.empty(3, dtype=np.float64)
+    for r in range(voxels.shape[0]):
+        for f in range(FACES.shape[0]):
+            i = voxels[r, 0] + FACES[f, 0]
+            j = voxels[r, 1] + FACES[f, 1]
+            k = voxels[r, 2] + FACES[f, 2]
+            if not (0 <= i < si and 0 <= j < sj and 0 <= k < sk) or state[i, j, k] != unknown:
+                continue
+            end[0], end[1], end[2] = i + 0.5, j + 0.5, k + 0.5
+            if _line_clear(occupied, eyes[r], end):
+                seen[r] = True
+                break
+    return seen
+
+
+@numba.njit(cache=True)
+def _traversable_pairs(
+    traversable: BoolGrid, target_c: npt.NDArray[np.float64],
+    offset_vox: npt.NDArray[np.float64], extra_c: npt.NDArray[np.float64],
+) -> npt.NDArray[np.int64]:
+    """Indices of the (eye, target) pairs whose eye voxel is inside the grid and traversable.
+
+    Pairs are numbered as `frontier_viewpoints` orders them: `extra_c[e]` with `target_c[t]` is
+    pair e * T + t; `target_c[t] + offset_vox[o]` with `target_c[t]` is E * T + t * O + o."""
+    n_t, n_o, n_e = target_c.shape[0], offset_vox.shape[0], extra_c.shape[0]
+    si, sj, sk = traversable.shape
+    out = np.empty(n_e * n_t + n_t * n_o, dtype=np.int64)
+    n = 0
+    for e in range(n_e):
+        i = int(np.floor(extra_c[e, 0]))
+        j = int(np.floor(extra_c[e, 1]))
+        k = int(np.floor(extra_c[e, 2]))
+        if 0 <= i < si and 0 <= j < sj and 0 <= k < sk and traversable[i, j, k]:
+            for t in range(n_t):
+                out[n] = e * n_t + t
+                n += 1
+    base = n_e * n_t
+    for t in range(n_t):
+        for o in range(n_o):
+            i = int(np.floor(target_c[t, 0] + offset_vox[o, 0]))
+            j = int(np.floor(target_c[t, 1] + offset_vox[o, 1]))
+            k = int(np.floor(target_c[t, 2] + offset_vox[o, 2]))
+            if 0 <= i < si and 0 <= j < sj and 0 <= k < sk and traversable[i, j, k]:
+                out[n] = base + t * n_o + o
+                n += 1
+    return out[:n]
 
 
 def ring_offsets(distances_m: tuple[float, ...], heights_m: tuple[float, ...],
@@ -115,28 +176,28 @@ def frontier_viewpoints(
     target_ids = np.concatenate(ids)
     vs = view.voxel_size
     offset_vox = offsets_m / vs
-    # Every (target, offset) pair, in voxel units with voxel centres at +0.5.
+    # The (eye, frontier voxel) pairs, in voxel units with voxel centres at +0.5: each `extra`
+    # voxel with every target, then every target with every ring offset. Only the pairs whose
+    # eye is a traversable voxel are made; a whole-array pass over every pair cost more than
+    # the rest of a Classic plan on the large areas.
     target_c = target_idx.astype(np.float64) + 0.5
-    cand_c = (target_c[:, None, :] + offset_vox[None, :, :]).reshape(-1, 3)
-    tgt_c = np.repeat(target_c, len(offset_vox), axis=0)
-    rep_targets = np.repeat(target_idx, len(offset_vox), axis=0)
-    rep_ids = np.repeat(target_ids, len(offset_vox))
-    if extra is not None and len(extra):
-        extra_c = np.asarray(extra, dtype=np.float64) + 0.5
-        cand_c = np.vstack([np.repeat(extra_c, len(target_c), axis=0), cand_c])
-        tgt_c = np.vstack([np.tile(target_c, (len(extra_c), 1)), tgt_c])
-        rep_targets = np.vstack([np.tile(target_idx, (len(extra_c), 1)), rep_targets])
-        rep_ids = np.concatenate([np.tile(target_ids, len(extra_c)), rep_ids])
+    extra_c = (np.asarray(extra, dtype=np.float64) + 0.5 if extra is not None and len(extra)
+               else np.zeros((0, 3), dtype=np.float64))
+    kept = _traversable_pairs(view.traversable, target_c, offset_vox, extra_c)
+    n_extra = len(extra_c) * len(target_c)
+    from_extra = kept < n_extra
+    ring = kept[~from_extra] - n_extra
+    pair_t = np.concatenate([kept[from_extra] % len(target_c), ring // len(offset_vox)])
+    cand_c = np.concatenate([extra_c[kept[from_extra] // len(target_c)],
+                             target_c[ring // len(offset_vox)]
+                             + offset_vox[ring % len(offset_vox)]])
     cand = np.floor(cand_c).astype(np.int64)
-    shape = np.array(view.shape)
-    ok = np.all((cand >= 0) & (cand < shape), axis=1)
-    cand, cand_c, tgt_c, rep_targets, rep_ids = (
-        cand[ok], cand_c[ok], tgt_c[ok], rep_targets[ok], rep_ids[ok]
-    )
-    ok = view.traversable[cand[:, 0], cand[:, 1], cand[:, 2]]
+    tgt_c = target_c[pair_t]
+    rep_targets = target_idx[pair_t]
+    rep_ids = target_ids[pair_t]
     delta = (tgt_c - cand_c) * vs
     horizontal = np.linalg.norm(delta[:, :2], axis=1)
-    ok &= np.arctan2(np.abs(delta[:, 2]), horizontal) <= max_elevation_rad
+    ok = np.arctan2(np.abs(delta[:, 2]), horizontal) <= max_elevation_rad
     ok &= np.linalg.norm(delta, axis=1) <= max_range_m
     cand, cand_c, tgt_c, rep_targets, rep_ids = (
         cand[ok], cand_c[ok], tgt_c[ok], rep_targets[ok], rep_ids[ok]
@@ -158,15 +219,6 @@ def sees_into_unknown(view: MapView, eyes: npt.NDArray[np.float64],
     A frontier voxel no such line reaches cannot be cleared from that eye: the free voxels a
     floor slab's surface shares with grazing rays, say, lie over the slab's interior, unknown
     for good, that the occupied floor voxels around them hide."""
-    shape = np.array(view.shape)
-    seen = np.zeros(len(voxels), dtype=np.bool_)
-    for face in FACES:
-        nb = voxels + face
-        inside = np.all((nb >= 0) & (nb < shape), axis=1)
-        nb = np.where(inside[:, None], nb, 0)
-        unknown = inside & (view.state[nb[:, 0], nb[:, 1], nb[:, 2]] == VoxelState.UNKNOWN)
-        todo = np.flatnonzero(unknown & ~seen)
-        if len(todo):
-            seen[todo] = lines_clear(view.occupied, np.ascontiguousarray(eyes[todo]),
-                                     nb[todo].astype(np.float64) + 0.5)
-    return seen
+    return _sees_into_unknown(view.occupied, view.state, int(VoxelState.UNKNOWN),
+                              np.ascontiguousarray(eyes, dtype=np.float64),
+                              np.ascontiguousarray(voxels, dtype=np.int64))

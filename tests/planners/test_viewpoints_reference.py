@@ -1,0 +1,122 @@
+"""`frontier_viewpoints` and `sees_into_unknown` against brute-force references on random maps:
+every (eye, frontier voxel) pair made as whole arrays and filtered in turn, every face neighbour
+tried in turn. They must agree exactly, order included: a planner's flights depend on the order
+of its candidates."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+
+from planners.classic import ClassicConfig
+from planners.viewpoints import (
+    FACES,
+    Viewpoints,
+    frontier_viewpoints,
+    lines_clear,
+    ring_offsets,
+    sees_into_unknown,
+)
+from sim.map_view import FrontierCluster, MapView
+from sim.occupancy import VoxelState
+from tests.planners.conftest import StackFactory
+
+
+def _reference(view: MapView, clusters: list[FrontierCluster], offsets_m: npt.NDArray[np.float64],
+               samples: int, max_elevation_rad: float, max_range_m: float,
+               extra: npt.NDArray[np.int64] | None) -> Viewpoints:
+    targets, ids = [], []
+    for cluster in clusters:
+        idx = cluster.indices
+        pick = np.unique(np.linspace(0, len(idx) - 1, samples).astype(np.int64))
+        targets.append(idx[pick])
+        ids.append(np.full(len(pick), cluster.id, dtype=np.int64))
+    target_idx, target_ids = np.concatenate(targets), np.concatenate(ids)
+    vs = view.voxel_size
+    offset_vox = offsets_m / vs
+    target_c = target_idx.astype(np.float64) + 0.5
+    cand_c = (target_c[:, None, :] + offset_vox[None, :, :]).reshape(-1, 3)
+    tgt_c = np.repeat(target_c, len(offset_vox), axis=0)
+    rep_targets = np.repeat(target_idx, len(offset_vox), axis=0)
+    rep_ids = np.repeat(target_ids, len(offset_vox))
+    if extra is not None:
+        extra_c = extra.astype(np.float64) + 0.5
+        cand_c = np.vstack([np.repeat(extra_c, len(target_c), axis=0), cand_c])
+        tgt_c = np.vstack([np.tile(target_c, (len(extra_c), 1)), tgt_c])
+        rep_targets = np.vstack([np.tile(target_idx, (len(extra_c), 1)), rep_targets])
+        rep_ids = np.concatenate([np.tile(target_ids, len(extra_c)), rep_ids])
+    keep: list[int] = []
+    for r in range(len(cand_c)):
+        cand = np.floor(cand_c[r]).astype(np.int64)
+        if np.any(cand < 0) or np.any(cand >= np.array(view.shape)):
+            continue
+        if not view.traversable[tuple(cand)]:
+            continue
+        delta = (tgt_c[r] - cand_c[r]) * vs
+        if np.arctan2(abs(delta[2]), np.linalg.norm(delta[:2])) > max_elevation_rad:
+            continue
+        if np.linalg.norm(delta) > max_range_m:
+            continue
+        keep.append(r)
+    rows = np.array(keep, dtype=np.int64)
+    clear = lines_clear(view.occupied, np.floor(cand_c[rows]) + 0.5, tgt_c[rows])
+    rows = rows[clear]
+    return Viewpoints(np.floor(cand_c[rows]).astype(np.int64), rep_targets[rows], rep_ids[rows])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_viewpoints_match_the_brute_force_reference(make_stack: StackFactory, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    shape = (36, 30, 16)
+    state = np.full(shape, VoxelState.FREE, dtype=np.uint8)
+    state[rng.random(shape) < 0.003] = VoxelState.OCCUPIED
+    for _ in range(4):  # unknown blocks, so that the map has frontiers of several clusters
+        lo = rng.integers(0, np.array(shape) - 6)
+        state[tuple(slice(a, a + int(rng.integers(3, 7))) for a in lo)] = VoxelState.UNKNOWN
+    view = make_stack(state, 0.1, 0.2).view()
+    clusters = view.frontier_clusters(1)
+    assert clusters, "the random map has no frontier"
+    cfg = ClassicConfig()
+    offsets = ring_offsets(cfg.view_distances_m, cfg.view_height_offsets_m, cfg.view_directions)
+    extra = (np.array([[18, 15, 8], [2, 3, 4]], dtype=np.int64) if seed % 2 else None)
+    args = (cfg.samples_per_cluster, np.radians(cfg.max_view_elevation_deg), 3.0)
+    fast = frontier_viewpoints(view, clusters, offsets, samples_per_cluster=args[0],
+                               max_elevation_rad=args[1], max_range_m=args[2], extra=extra)
+    slow = _reference(view, clusters, offsets, *args, extra)
+    assert len(slow) > 200, len(slow)
+    np.testing.assert_array_equal(fast.voxels, slow.voxels)
+    np.testing.assert_array_equal(fast.targets, slow.targets)
+    np.testing.assert_array_equal(fast.cluster_ids, slow.cluster_ids)
+
+
+def _sees_reference(view: MapView, eyes: npt.NDArray[np.float64],
+                    voxels: npt.NDArray[np.int64]) -> npt.NDArray[np.bool_]:
+    seen = np.zeros(len(voxels), dtype=np.bool_)
+    for r in range(len(voxels)):
+        for face in FACES:
+            nb = voxels[r] + face
+            if np.any(nb < 0) or np.any(nb >= np.array(view.shape)):
+                continue
+            if view.state[tuple(nb)] != VoxelState.UNKNOWN:
+                continue
+            if lines_clear(view.occupied, eyes[r:r + 1], nb[None].astype(np.float64) + 0.5)[0]:
+                seen[r] = True
+                break
+    return seen
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_sight_into_the_unknown_matches_the_brute_force_reference(make_stack: StackFactory,
+                                                                  seed: int) -> None:
+    rng = np.random.default_rng(100 + seed)
+    shape = (30, 30, 14)
+    state = np.full(shape, VoxelState.FREE, dtype=np.uint8)
+    state[rng.random(shape) < 0.05] = VoxelState.OCCUPIED
+    state[rng.random(shape) < 0.05] = VoxelState.UNKNOWN
+    view = make_stack(state, 0.1, 0.2).view()
+    voxels = np.argwhere(view.frontier)[:400].astype(np.int64)
+    eyes = rng.uniform(0, np.array(shape), size=(len(voxels), 3))
+    expected = _sees_reference(view, eyes, voxels)
+    assert 0 < np.count_nonzero(expected) < len(expected)
+    np.testing.assert_array_equal(sees_into_unknown(view, eyes, voxels), expected)
