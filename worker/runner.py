@@ -195,12 +195,12 @@ def _raised_at(exc: BaseException) -> str:
 
 def _simulate(spec: RunSpec, area: Area, tmp: Path, beat: Heartbeat, store: ArtifactStore,
               settings: Settings, speed: float | None) -> EpisodeResult:
-    from areas import load_ground_truth  # the simulation stack, see load_run_area
+    from areas.build_lock import load_ground_truth_once  # the simulation stack, see load_run_area
     from planners.registry import make
     from sim.config import preset
     from sim.episode import run_episode
 
-    truth = load_ground_truth(area)
+    truth = load_ground_truth_once(area)  # two workers starting on a new area compute it once
     last_note = [0.0]
 
     def progress(t: float, volume: float) -> None:

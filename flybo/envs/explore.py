@@ -21,8 +21,9 @@ import numpy as np
 import numpy.typing as npt
 from gymnasium import spaces
 
-from areas import area_names, load_area, load_ground_truth
+from areas import area_names, load_area
 from areas.area import Area, GroundTruth
+from areas.build_lock import load_ground_truth_once
 from planners.policy import ObservationKey, PolicyConfig, action_to_plan, observe
 from sim.config import EpisodeConfig, preset
 from sim.episode import EpisodeStepper
@@ -92,7 +93,7 @@ class ExploreEnv(gym.Env[EnvObservation, npt.NDArray[np.float32]]):
     def _scene(self, name: str) -> tuple[Area, GroundTruth]:
         if name not in self._scenes:
             area = load_area(name)
-            self._scenes[name] = (area, load_ground_truth(area))
+            self._scenes[name] = (area, load_ground_truth_once(area))
         return self._scenes[name]
 
     # -- the Gymnasium API -------------------------------------------------------------------

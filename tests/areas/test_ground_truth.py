@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -211,3 +214,50 @@ def test_corrupt_cache_file_is_recomputed(tmp_path: Path, monkeypatch: pytest.Mo
     truth = load_ground_truth(area)
     assert np.count_nonzero(truth.observable) == 20**3
     assert ground_truth._read(path, area) is not None
+
+
+# Builds a 2 m box area's ground truth in a fresh process, counting its computations in a file;
+# the computation sleeps first, so two such processes started together both miss the cache.
+_BUILDER = """
+import sys, time
+from pathlib import Path
+import numpy as np
+import trimesh
+from areas import ground_truth
+from areas.area import Area, AreaInfo, StartPose
+from areas.build_lock import load_ground_truth_once
+
+box = trimesh.creation.box(extents=[2.0, 2.0, 2.0],
+                           transform=trimesh.transformations.translation_matrix([1.0, 1.0, 1.0]))
+box.invert()
+area = Area(name="test", vertices=np.asarray(box.vertices, dtype=np.float64),
+            triangles=np.asarray(box.faces, dtype=np.int32), bounds_min=np.zeros(3),
+            bounds_max=np.full(3, 2.0), start=StartPose(position=np.ones(3), yaw=0.0),
+            plateau_s=10.0, voxel_size=0.1,
+            info=AreaInfo(title="TEST", rooms=1, levels=1, complexity="low", indoor=True))
+compute = ground_truth.compute_ground_truth
+
+def counted(a):
+    with open(sys.argv[1], "a") as f:
+        f.write("computed\\n")
+    time.sleep(2.0)
+    return compute(a)
+
+ground_truth.compute_ground_truth = counted
+truth = load_ground_truth_once(area)
+print(int(np.count_nonzero(truth.observable)))
+"""
+
+
+@pytest.mark.slow
+def test_processes_missing_the_cache_at_once_compute_it_once(tmp_path: Path) -> None:
+    counter = tmp_path / "computations"
+    env = {**os.environ, "FLYBO_CACHE_DIR": str(tmp_path / "cache"),
+           "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    children = [subprocess.Popen([sys.executable, "-c", _BUILDER, str(counter)], env=env,
+                                 stdout=subprocess.PIPE, text=True) for _ in range(2)]
+    outputs = [child.communicate(timeout=300)[0] for child in children]
+    assert [child.returncode for child in children] == [0, 0]
+    assert [int(out.split()[-1]) for out in outputs] == [20**3, 20**3]
+    assert counter.read_text().splitlines() == ["computed"]
+    assert len(list((tmp_path / "cache" / "ground_truth").iterdir())) == 1

@@ -9,7 +9,7 @@ import pytest
 from scipy.optimize import minimize_scalar
 
 from sim.occupancy import VoxelState
-from sim.search_checks import path_meets_new_obstacle
+from sim.search_checks import path_meets_new_obstacle, segment_cube_sq
 
 VOXEL = 0.1
 ORIGIN = np.array([-1.0, -2.0, 0.0])
@@ -83,3 +83,39 @@ def test_an_obstacle_on_the_path_is_found_and_one_beside_it_only_within_reach() 
     ahead[10, 21, 5] = VoxelState.OCCUPIED  # its cube 0.55 m beyond the path's end
     assert not path_meets_new_obstacle(ahead, before, ORIGIN, VOXEL, 0.5, path)
     assert path_meets_new_obstacle(ahead, before, ORIGIN, VOXEL, 0.6, path)
+
+
+def _every_new_voxel(state: npt.NDArray[np.uint8], before: npt.NDArray[np.uint8],
+                     points: npt.NDArray[np.float64], reach_m: float) -> bool:
+    """The check's answer from every newly occupied voxel of the grid, each measured with the
+    kernel's own exact segment-to-cube distance: what the slab-by-slab scan must reproduce."""
+    new = np.argwhere((state == VoxelState.OCCUPIED) & (before != VoxelState.OCCUPIED))
+    grid = (points - ORIGIN) / VOXEL
+    reach_sq = (reach_m / VOXEL) ** 2
+    for a, b in zip(np.vstack([grid[:1], grid[:-1]]), grid, strict=True):
+        for i, j, k in new:
+            if segment_cube_sq(a, b, int(i), int(j), int(k)) < reach_sq:
+                return True
+    return False
+
+
+@pytest.mark.parametrize("seed", range(60))
+def test_long_diagonal_paths_match_every_voxel_tested(seed: int) -> None:
+    # Long legs in every direction across the grid, with the new voxels placed near them, so
+    # that many fall just inside or just outside the reach of a leg.
+    rng = np.random.default_rng(1000 + seed)
+    before = np.full(SHAPE, VoxelState.FREE, dtype=np.uint8)
+    upper = ORIGIN + np.array(SHAPE) * VOXEL
+    points = rng.uniform(ORIGIN, upper, size=(int(rng.integers(2, 6)), 3))
+    if seed % 3 == 0:
+        points[:, int(rng.integers(3))] = points[0, 0]  # legs in a plane of constant coordinate
+    state = before.copy()
+    t = rng.uniform(0.0, 1.0, size=40)
+    leg = rng.integers(1, len(points), size=40)
+    near = points[leg - 1] + t[:, None] * (points[leg] - points[leg - 1])
+    near += rng.normal(0.0, 0.25, size=near.shape)
+    voxels = np.clip(((near - ORIGIN) / VOXEL).astype(np.int64), 0, np.array(SHAPE) - 1)
+    state[tuple(voxels.T)] = VoxelState.OCCUPIED
+    for reach in (0.05, 0.15, 0.3):
+        expected = _every_new_voxel(state, before, points, reach)
+        assert path_meets_new_obstacle(state, before, ORIGIN, VOXEL, reach, points) == expected
