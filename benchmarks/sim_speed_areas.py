@@ -25,7 +25,7 @@ from planners.registry import make, spec
 from sim.config import preset
 from sim.episode import run_episode
 
-STAGES = ("render", "occupancy", "tsdf", "physics", "metrics")
+STAGES = ("render", "occupancy", "tsdf", "physics", "metrics", "checks", "recording")
 
 
 def measure(area_name: str, planner: str, preset_name: str, seconds: float,
