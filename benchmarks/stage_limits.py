@@ -160,13 +160,7 @@ def measure(area_name: str, planner: str, seconds: float, seed: int, repeats: in
     strides = [1 if whole else stride for whole in tsdf_frame]
 
     # -- render ----------------------------------------------------------------------------
-    rays = []
-    for pose, s in zip(poses, strides, strict=True):
-        unit = camera._unit_directions(s) @ camera.world_from_optical(pose.yaw).T
-        r = np.empty((unit.shape[0], 6), dtype=np.float32)
-        r[:, :3] = pose.position
-        r[:, 3:] = unit
-        rays.append(o3d.core.Tensor(r))
+    rays = [o3d.core.Tensor(camera.rays(pose, s)) for pose, s in zip(poses, strides, strict=True)]
     scene = camera._scene
     rng = np.random.default_rng(seed)
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
@@ -129,41 +130,27 @@ class DepthCamera:
             self._unit[stride] = dirs * inv_norm[:, None]
         return self._unit[stride]
 
+    def rays(self, pose: Pose, stride: int = 1) -> npt.NDArray[np.float32]:
+        """(P, 6) float32 rays Embree casts for the image from `pose` at `stride`: the camera
+        centre and each kept pixel's unit direction, world frame, C order."""
+        unit_dirs = self._unit_directions(stride) @ self.world_from_optical(pose.yaw).T
+        rays = np.empty((unit_dirs.shape[0], 6), dtype=np.float32)
+        rays[:, :3] = pose.position
+        rays[:, 3:] = unit_dirs
+        return rays
+
     def render(self, pose: Pose, time: float = 0.0, stride: int = 1) -> DepthFrame:
         """Ray-cast one depth image from `pose`; with `stride` > 1 only every stride-th row and
         column (an image of ceil(H / stride) x ceil(W / stride) pixels)."""
         cfg = self.config
         _, inv_norm = self._directions(stride)
-        unit_dirs = self._unit_directions(stride) @ self.world_from_optical(pose.yaw).T
-        rays = np.empty((unit_dirs.shape[0], 6), dtype=np.float32)
-        rays[:, :3] = pose.position
-        rays[:, 3:] = unit_dirs
+        rays = self.rays(pose, stride)
         hits = self._scene.cast_rays(o3d.core.Tensor(rays))
-        t_hit = self._plane_distances(rays, hits["primitive_ids"].numpy(), hits["t_hit"].numpy())
-        depth = (t_hit * inv_norm).astype(np.float32)  # ray length -> z-depth
-        depth[(depth > cfg.max_range_m) | (depth < cfg.min_range_m)] = np.nan
+        depth = _z_depths(rays, hits["primitive_ids"].numpy(), hits["t_hit"].numpy(),
+                          self._normals, self._offsets, inv_norm,
+                          np.float32(cfg.min_range_m), np.float32(cfg.max_range_m))
         shape = (-(-cfg.height // stride), -(-cfg.width // stride))
         return DepthFrame(time=time, depth=depth.reshape(shape), pose=pose)
-
-    def _plane_distances(self, rays: npt.NDArray[np.float32], prims: npt.NDArray[np.uint32],
-                         t_embree: npt.NDArray[np.float32]) -> FloatArray:
-        """(N,) distances along `rays` (N, 6: origin, unit direction) to the planes of the hit
-        triangles `prims`; inf where nothing was hit."""
-        t = np.full(prims.shape, np.inf)
-        hit = np.flatnonzero(prims != _NO_HIT)
-        if hit.size == 0:
-            return t
-        ids = prims[hit].astype(np.int64)
-        n = self._normals[ids]
-        o = rays[hit, :3].astype(np.float64)
-        d = rays[hit, 3:].astype(np.float64)
-        # Written out rather than as a dot product: BLAS and einsum may fuse or reorder.
-        denom = n[:, 0] * d[:, 0] + n[:, 1] * d[:, 1] + n[:, 2] * d[:, 2]
-        num = self._offsets[ids] - (n[:, 0] * o[:, 0] + n[:, 1] * o[:, 1] + n[:, 2] * o[:, 2])
-        steep = np.abs(denom) > _GRAZING_COS
-        exact = np.where(steep, num / np.where(steep, denom, 1.0), t_embree[hit])
-        t[hit] = exact
-        return t
 
     def back_project(
         self, depth: npt.NDArray[np.float32], pose: Pose, stride: int = 1
@@ -184,6 +171,37 @@ class DepthCamera:
         points_optical = dirs * z[:, None]
         endpoints = points_optical @ self.world_from_optical(pose.yaw).T + pose.position
         return endpoints, hit
+
+
+@numba.njit(cache=True)
+def _z_depths(rays: npt.NDArray[np.float32], prims: npt.NDArray[np.uint32],
+              t_embree: npt.NDArray[np.float32], normals: FloatArray, offsets: FloatArray,
+              inv_norm: FloatArray, min_range: np.float32, max_range: np.float32
+              ) -> npt.NDArray[np.float32]:
+    """(N,) float32 z-depth of each ray, NaN outside [min_range, max_range] (compared in
+    float32, as NumPy compares a float32 image with a Python float) or without a hit.
+
+    The distance along each ray (N, 6: origin, unit direction) is taken to the plane of the
+    triangle Embree hit (`normals` (F, 3) and `offsets` (F,)), in float64 and in a fixed order
+    of operations, so every machine computes the same bits; grazing hits keep Embree's
+    distance. Times `inv_norm` (N,) it is the z-depth.
+    """
+    out = np.empty(prims.shape[0], dtype=np.float32)
+    for r in range(prims.shape[0]):
+        t = np.inf
+        if prims[r] != _NO_HIT:
+            f = np.int64(prims[r])
+            n0, n1, n2 = normals[f, 0], normals[f, 1], normals[f, 2]
+            o0, o1, o2 = np.float64(rays[r, 0]), np.float64(rays[r, 1]), np.float64(rays[r, 2])
+            d0, d1, d2 = np.float64(rays[r, 3]), np.float64(rays[r, 4]), np.float64(rays[r, 5])
+            denom = n0 * d0 + n1 * d1 + n2 * d2
+            if abs(denom) > _GRAZING_COS:
+                t = (offsets[f] - (n0 * o0 + n1 * o1 + n2 * o2)) / denom
+            else:
+                t = np.float64(t_embree[r])
+        depth = np.float32(t * inv_norm[r])
+        out[r] = np.nan if depth > max_range or depth < min_range else depth
+    return out
 
 
 def _triangle_planes(vertices: FloatArray, triangles: npt.NDArray[np.int64]

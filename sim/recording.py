@@ -17,6 +17,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from sim.voxel_grid import IndexBox
+
 FORMAT = "flybo-recording"
 VERSION = 1
 
@@ -96,17 +98,34 @@ class RecordingWriter:
         self._pose_times.append(time)
         self._poses.append(np.array([*position, yaw], dtype=np.float32))
 
-    def map_keyframe(self, time: float, state: npt.NDArray[np.uint8]) -> None:
-        """Store the voxels whose state changed since the previous keyframe."""
-        flat = state.reshape(-1)
-        if self._previous_state is None:
-            changed = np.flatnonzero(flat)
+    def map_keyframe(self, time: float, state: npt.NDArray[np.uint8],
+                     changed_box: IndexBox | None = None, *, box_known: bool = False) -> None:
+        """Store the voxels whose state changed since the previous keyframe, in C order.
+
+        With `box_known`, `changed_box` holds every voxel that changed since then (None:
+        none did), so only it is compared: a keyframe then costs the box, not the grid.
+        """
+        if self._previous_state is None or not box_known:
+            flat = state.reshape(-1)
+            changed = (np.flatnonzero(flat) if self._previous_state is None
+                       else np.flatnonzero(flat != self._previous_state.reshape(-1)))
+            self._previous_state = state.copy()
+            values = flat[changed]
+        elif changed_box is None:
+            changed = np.zeros(0, dtype=np.int64)
+            values = np.zeros(0, dtype=np.uint8)
         else:
-            changed = np.flatnonzero(flat != self._previous_state)
-        self._previous_state = flat.copy()
+            box = changed_box.slices()
+            now, before = state[box], self._previous_state[box]
+            where = np.nonzero(now != before)  # C order in the box is C order in the grid
+            lo = changed_box.lo
+            changed = np.ravel_multi_index(
+                (where[0] + lo[0], where[1] + lo[1], where[2] + lo[2]), state.shape)
+            values = now[where]
+            self._previous_state[box] = now
         self._key_times.append(time)
         self._key_indices.append(changed.astype(np.uint32))
-        self._key_states.append(flat[changed].astype(np.uint8))
+        self._key_states.append(values.astype(np.uint8))
 
     def plan(self, time: float, waypoints: np.ndarray) -> None:
         self._plan_times.append(time)

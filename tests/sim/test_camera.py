@@ -288,3 +288,51 @@ def test_depth_does_not_depend_on_embree_distances() -> None:
     assert np.array_equal(cam.render(pose).depth, plain)
     # ... and the distance from the triangles' planes is at least as close to the truth.
     assert np.allclose(plain, analytic_depth(cfg, pose.position, pose.yaw), rtol=0.0, atol=1e-5)
+
+
+def _numpy_depth(cam: DepthCamera, pose: Pose, stride: int) -> npt.NDArray[np.float32]:
+    """The depth image as whole-array NumPy passes compute it (the formulation the compiled
+    loop must reproduce to the bit): plane distances in float64, z-depth in float32, the
+    range mask compared in float32."""
+    cfg = cam.config
+    _, inv_norm = cam._directions(stride)
+    rays = cam.rays(pose, stride)
+    hits = cam._scene.cast_rays(o3d.core.Tensor(rays))
+    prims, t_embree = hits["primitive_ids"].numpy(), hits["t_hit"].numpy()
+    t = np.full(prims.shape, np.inf)
+    hit = np.flatnonzero(prims != np.uint32(0xFFFFFFFF))
+    ids = prims[hit].astype(np.int64)
+    n, offsets = cam._normals[ids], cam._offsets[ids]
+    o, d = rays[hit, :3].astype(np.float64), rays[hit, 3:].astype(np.float64)
+    denom = n[:, 0] * d[:, 0] + n[:, 1] * d[:, 1] + n[:, 2] * d[:, 2]
+    num = offsets - (n[:, 0] * o[:, 0] + n[:, 1] * o[:, 1] + n[:, 2] * o[:, 2])
+    steep = np.abs(denom) > 1e-6
+    t[hit] = np.where(steep, num / np.where(steep, denom, 1.0), t_embree[hit])
+    depth = (t * inv_norm).astype(np.float32)
+    depth[(depth > cfg.max_range_m) | (depth < cfg.min_range_m)] = np.nan
+    return depth.reshape(-(-cfg.height // stride), -(-cfg.width // stride))
+
+
+@pytest.mark.parametrize("stride", [1, 2])
+def test_depth_is_the_numpy_formulation_to_the_bit(stride: int) -> None:
+    # A cluttered scene (random triangles inside the box, many seen edge-on), a near range
+    # limit that cuts through it, poses all over: every pixel, NaNs included, is equal.
+    rng = np.random.default_rng(11)
+    vertices, triangles = box_mesh()
+    soup = rng.uniform(0.2, 3.8, size=(600, 3)) * np.array([1.0, 1.0, 0.75])
+    flat = soup.reshape(-1, 3, 3)
+    flat[::3, :, 2] = flat[::3, :1, 2]  # a third lie in horizontal planes: grazing at eye level
+    all_vertices = np.vstack([vertices, soup])
+    all_triangles = np.vstack([triangles, len(vertices) + np.arange(600).reshape(-1, 3)])
+    cam = DepthCamera(all_vertices, all_triangles.astype(np.int32),
+                      CameraConfig(min_range_m=0.35, max_range_m=2.5))
+    finite = missing = 0
+    for _ in range(20):
+        pose = Pose(rng.uniform([0.3, 0.3, 0.3], [3.7, 3.7, 2.7]), float(rng.uniform(-4, 4)))
+        rendered = cam.render(pose, 0.0, stride).depth
+        expected = _numpy_depth(cam, pose, stride)
+        assert rendered.dtype == np.float32
+        assert np.array_equal(rendered, expected, equal_nan=True)
+        finite += int(np.isfinite(expected).sum())
+        missing += int(np.isnan(expected).sum())
+    assert finite > 1000 and missing > 1000

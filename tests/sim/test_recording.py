@@ -10,6 +10,7 @@ import numpy.typing as npt
 import pytest
 
 from sim.recording import FORMAT, VERSION, Recording, RecordingError, RecordingWriter, thinned
+from sim.voxel_grid import IndexBox
 
 SHAPE = (4, 3, 2)
 HEADER = {
@@ -286,3 +287,33 @@ def test_the_archive_holds_the_sequences_as_if_concatenated(tmp_path: Path) -> N
         "surface_times", "surface_offsets", "surface_points"])
     replayed = Recording(path)
     np.testing.assert_array_equal(replayed.map_state_at(10.0), states[-1])
+
+
+def test_keyframes_compared_in_the_changed_box_are_those_of_the_whole_grid() -> None:
+    # The same map history written twice: once comparing whole grids, once told a box that
+    # holds every change since the previous keyframe (sometimes larger, sometimes none).
+    rng = np.random.default_rng(8)
+    shape = (9, 7, 5)
+    whole, boxed = RecordingWriter(header=dict(HEADER)), RecordingWriter(header=dict(HEADER))
+    state = np.zeros(shape, dtype=np.uint8)
+    state[2:5, 1:4, 0:3] = 1
+    whole.map_keyframe(0.0, state)
+    boxed.map_keyframe(0.0, state)
+    for t in range(1, 40):
+        state = state.copy()
+        box = None
+        if t % 7:
+            lo = rng.integers(0, shape)
+            hi = np.minimum(lo + rng.integers(1, 5, size=3), shape)
+            region = state[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
+            region[...] = rng.choice(np.array([0, 1, 2], dtype=np.uint8), size=region.shape)
+            grown = np.maximum(lo - rng.integers(0, 2, size=3), 0)
+            box = IndexBox(tuple(int(v) for v in grown), tuple(int(v) for v in hi))
+        whole.map_keyframe(float(t), state)
+        boxed.map_keyframe(float(t), state, box, box_known=True)
+    assert len(whole._key_indices) == len(boxed._key_indices) == 40
+    for a, b in zip(whole._key_indices, boxed._key_indices, strict=True):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    for a, b in zip(whole._key_states, boxed._key_states, strict=True):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    assert sum(len(a) for a in whole._key_indices) > 100

@@ -101,3 +101,25 @@ def test_a_block_table_grown_many_times_holds_the_same_field() -> None:
     assert len(gt) == len(wt)
     np.testing.assert_array_equal(rows(np.sort(gv[gt].reshape(len(gt), 9), axis=1)),
                                   rows(np.sort(wv[wt].reshape(len(wt), 9), axis=1)))
+
+
+def test_surface_points_with_an_estimate_are_open3ds_counted_extraction() -> None:
+    """After the first extraction Open3D is told how many points to expect; the points are
+    those of its own counted extraction (in another order when it runs on several threads, as
+    any two of its extractions are), and an estimate that falls short (the surface grew more
+    than the margin) gives them too."""
+    volume = _box_flight(TsdfConfig())
+
+    def rows(points: np.ndarray) -> np.ndarray:
+        return points[np.lexsort(points.T[::-1])]
+
+    counted = volume._grid.extract_point_cloud(volume.config.weight_threshold)
+    expected = rows(counted.point.positions.numpy())
+    first = volume.surface_points()  # counted: nothing to estimate from yet
+    assert volume._points_per_block > 0.0
+    np.testing.assert_array_equal(rows(first), expected)
+    np.testing.assert_array_equal(rows(volume.surface_points()), expected)  # estimated
+    volume._points_per_block /= 4.0  # as if the surface had grown fourfold since
+    np.testing.assert_array_equal(rows(volume.surface_points()), expected)
+    short = volume._grid.extract_point_cloud(volume.config.weight_threshold, len(expected) // 2)
+    assert len(short.point.positions) == len(expected) // 2  # what the re-extraction catches

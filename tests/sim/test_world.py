@@ -8,9 +8,10 @@ import open3d as o3d
 import pytest
 from pydantic import ValidationError
 
+from sim import world as world_module
 from sim.trajectory import TrajectorySample, plan_trajectory
 from sim.vehicle import VehicleLimits
-from sim.world import Contact, PhysicsConfig, World
+from sim.world import Contact, PhysicsConfig, World, pybullet
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -154,3 +155,52 @@ def test_close_is_idempotent() -> None:
     world.step(at_rest(CENTRE))
     world.close()
     world.close()
+
+
+def test_contacts_of_a_scene_in_many_parts_match_each_part_asked_alone(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # The box split into six bodies of two triangles; the sphere pushed into a corner touches
+    # several at once. Each step's contact is the deepest over the parts, asked one by one.
+    monkeypatch.setattr(world_module, "MAX_PART_TRIANGLES", 2)
+    corner = np.array([5.85, 3.85, 0.15])
+    with make_world(CENTRE) as world:
+        assert len(world._scene) == 6
+        touched = 0
+        for _ in range(400):
+            contact = world.step(at_rest(corner))
+            depths = [c[8] for part in world._scene
+                      for c in pybullet.getContactPoints(world._body, part,
+                                                         physicsClientId=world._client)
+                      if c[8] <= 0.0]
+            if depths:
+                touched += 1
+                assert contact is not None and contact.depth == -min(depths)
+            else:
+                assert contact is None
+        assert touched > 100
+
+
+def test_the_control_law_is_numpys_to_the_bit(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The step computes the force in plain floats; NumPy's arrays in the same order of
+    # operations give the same bits.
+    rng = np.random.default_rng(5)
+    config = PhysicsConfig()
+    forces: list[list[float]] = []
+    real = pybullet.applyExternalForce
+
+    def keep(body: int, link: int, force: list[float], *args: object, **kw: object) -> None:
+        forces.append(list(force))
+        real(body, link, force, *args, **kw)
+
+    monkeypatch.setattr(pybullet, "applyExternalForce", keep)
+    with make_world(CENTRE, config) as world:
+        for _ in range(50):
+            reference = TrajectorySample(
+                position=CENTRE + rng.normal(0.0, 0.3, 3), velocity=rng.normal(0.0, 1.0, 3),
+                acceleration=rng.normal(0.0, 2.0, 3), yaw=0.0, yaw_rate=0.0)
+            p, v = world.position.copy(), world.velocity.copy()
+            world.step(reference)
+            accel = (reference.acceleration + config.kp * (reference.position - p)
+                     + config.kd * (reference.velocity - v))
+            expected = LIMITS.mass_kg * (accel + np.array([0.0, 0.0, world_module.GRAVITY]))
+            assert forces[-1] == expected.tolist()
