@@ -13,6 +13,9 @@ from sim.heap import release_free_heap
 from sim.occupancy import DirtyBoxSubscription
 from sim.recording import RecordingWriter
 from sim.sensing import Sensing
+from sim.voxel_grid import IndexBox
+
+_NOTHING_CHANGED = IndexBox((0, 0, 0), (0, 0, 0))
 
 
 class EpisodeRecorder:
@@ -62,8 +65,8 @@ class EpisodeRecorder:
             self.writer.map_keyframe(stamp, occupancy.state)
             self._changes = occupancy.subscribe()
         else:
-            self.writer.map_keyframe(stamp, occupancy.state, self._changes.take(),
-                                     box_known=True)
+            self.writer.map_keyframe(stamp, occupancy.state,
+                                     self._changes.take() or _NOTHING_CHANGED)
         self.last_keyframe = stamp
 
     def finish(self, now: float, sensing: Sensing) -> None:

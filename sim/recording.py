@@ -99,21 +99,18 @@ class RecordingWriter:
         self._poses.append(np.array([*position, yaw], dtype=np.float32))
 
     def map_keyframe(self, time: float, state: npt.NDArray[np.uint8],
-                     changed_box: IndexBox | None = None, *, box_known: bool = False) -> None:
+                     changed_box: IndexBox | None = None) -> None:
         """Store the voxels whose state changed since the previous keyframe, in C order.
 
-        With `box_known`, `changed_box` holds every voxel that changed since then (None:
+        `changed_box`, when given, holds every voxel that changed since then (an empty box:
         none did), so only it is compared: a keyframe then costs the box, not the grid.
         """
-        if self._previous_state is None or not box_known:
+        if self._previous_state is None or changed_box is None:
             flat = state.reshape(-1)
             changed = (np.flatnonzero(flat) if self._previous_state is None
                        else np.flatnonzero(flat != self._previous_state.reshape(-1)))
             self._previous_state = state.copy()
             values = flat[changed]
-        elif changed_box is None:
-            changed = np.zeros(0, dtype=np.int64)
-            values = np.zeros(0, dtype=np.uint8)
         else:
             box = changed_box.slices()
             now, before = state[box], self._previous_state[box]
