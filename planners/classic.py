@@ -17,6 +17,7 @@ stand, it searches from the traversable voxels the framework lets it escape to
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, ClassVar
 
 import numpy as np
@@ -25,7 +26,7 @@ from pydantic import Field
 from planners.api import Observation, Plan, Planner, PlannerConfig, PlannerContext
 from planners.give_up import GiveUpTracker
 from planners.search import BoolGrid, DistanceField, IndexArray, shortcut
-from planners.viewpoints import frontier_viewpoints, ring_offsets
+from planners.viewpoints import ViewpointCandidates, ring_offsets
 from planners.waypoints import escape_starts, nearest_traversable, path_waypoints
 
 # Pockets of traversable space an escaping vehicle tries before the exploration ends: each
@@ -110,7 +111,7 @@ class ClassicPlanner(Planner):
             starts = escape_starts(view, obs.pose.position, cfg.escape_reach_voxels)
         if len(starts) == 0:
             return Plan.finished("the vehicle is not in traversable space")
-        viewpoints = frontier_viewpoints(
+        candidates = ViewpointCandidates(
             view,
             clusters,
             self._offsets,
@@ -120,16 +121,17 @@ class ClassicPlanner(Planner):
             excluded=given_up,
             into_unknown=cfg.view_into_unknown,
         )
-        if len(viewpoints) == 0:
-            return Plan.finished("no frontier can be seen from traversable space")
-        goals = np.zeros(view.shape, dtype=np.bool_)
-        goals[viewpoints.voxels[:, 0], viewpoints.voxels[:, 1], viewpoints.voxels[:, 2]] = True
-        field = self._search(view.traversable, starts, view.voxel_size, goals)
+        # The search tests a candidate's line of sight when it reaches the candidate's voxel:
+        # the nearest viewpoint is the same as with every candidate tested first, at a fraction
+        # of the tests on large maps.
+        field = (self._search(view.traversable, starts, view.voxel_size, candidates.eyes,
+                              candidates.accepts) if len(candidates) else None)
         goal = None if field is None else field.nearest_goal
         if field is None or goal is None:
+            if len(candidates.all()) == 0:
+                return Plan.finished("no frontier can be seen from traversable space")
             return Plan.finished("no frontier viewpoint is reachable")
-        which = np.flatnonzero(np.all(viewpoints.voxels == goal, axis=1))[0]
-        self._goal, self._target = goal, viewpoints.targets[which]
+        self._goal, self._target = goal, candidates.target_at(goal)
         path = shortcut(field.path_to(goal), view.traversable)
         target_world = view.index_to_world(self._target[None])[0]
         waypoints = path_waypoints(view, path, obs.pose.position, target_world)
@@ -141,7 +143,8 @@ class ClassicPlanner(Planner):
 
     @staticmethod
     def _search(traversable: BoolGrid, starts: IndexArray, voxel_size: float,
-                goals: BoolGrid) -> DistanceField | None:
+                goals: BoolGrid, accept: Callable[[IndexArray], bool] | None = None,
+                ) -> DistanceField | None:
         """The search from the first of `starts` that reaches a goal, skipping starts a failed
         search already reached (the same pocket), at most `_MAX_POCKETS` searches; None when
         none does."""
@@ -149,7 +152,7 @@ class ClassicPlanner(Planner):
         for start in starts:
             if any(np.isfinite(f.distance_to(start)) for f in failed):
                 continue
-            field = DistanceField(traversable, start, voxel_size, goals=goals)
+            field = DistanceField(traversable, start, voxel_size, goals=goals, accept=accept)
             if field.nearest_goal is not None or len(starts) == 1:
                 return field
             failed.append(field)

@@ -7,6 +7,7 @@ any planner can reuse them with its own notion of where the vehicle may fly.
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from functools import cached_property
 
 import numba
@@ -79,7 +80,6 @@ def _corner_free(passable: BoolGrid, ci: int, cj: int, ck: int, i: int, j: int, 
 @numba.njit(cache=True)
 def _dijkstra(
     passable: BoolGrid,
-    start: IndexArray,
     goals: BoolGrid,
     offsets: IndexArray,
     step_cost: npt.NDArray[np.float64],
@@ -88,37 +88,43 @@ def _dijkstra(
     parent: npt.NDArray[np.int64],
     done: npt.NDArray[np.bool_],
     touched: npt.NDArray[np.int64],
-) -> tuple[int, npt.NDArray[np.int64], int]:
-    """Distances in voxels from `start`; stops at the first popped voxel set in `goals`
-    (returned as a flat index, -1 if none) or when the frontier passes `max_cost`.
+    n_touched: int,
+    keys: npt.NDArray[np.float64],
+    vals: npt.NDArray[np.int64],
+    size: int,
+    expand: int,
+) -> tuple[int, npt.NDArray[np.int64], int, npt.NDArray[np.float64], npt.NDArray[np.int64], int]:
+    """Runs a search on until the first popped voxel set in `goals` (returned as a flat index,
+    -1 if none) or until the frontier passes `max_cost`.
 
-    `dist`, `parent` and `done` are flat workspaces over the grid, clean on entry (inf, -1,
-    False); the search writes its results there and lists every voxel it gave a distance in
-    `touched` (grown when full; the array in use is returned with the count), so that the
-    caller can read and clean up only those instead of the whole grid.
+    `dist`, `parent` and `done` are flat workspaces over the grid (inf, -1, False where the search
+    has not been); the search writes its results there and lists every voxel it gave a distance
+    in `touched[:n_touched]` (grown when full), so that the caller can read and clean up only
+    those instead of the whole grid. `keys`, `vals` and `size` are its heap (grown when full).
+    `expand`, when not -1, is the goal the previous call returned and the caller turned down: it
+    is expanded first, as if it had not been a goal. Returns the goal, then the arrays in use
+    with their counts, to continue from.
     """
     nx, ny, nz = passable.shape
     flat_passable = passable.ravel()
     flat_goals = goals.ravel()
-    # Lazy deletion bounds pushes by the number of relaxations; grow on demand.
-    keys = np.empty(1 << 12, dtype=np.float64)
-    vals = np.empty(1 << 12, dtype=np.int64)
-    s = (start[0] * ny + start[1]) * nz + start[2]
-    dist[s] = 0.0
-    touched[0] = s
-    n_touched = 1
-    size = _heap_push(keys, vals, 0, 0.0, s)
-    while size > 0:
-        d = keys[0]
-        cur = vals[0]
-        size = _heap_pop(keys, vals, size)
-        if done[cur]:
-            continue
-        if d > max_cost:
-            break
-        done[cur] = True
-        if flat_goals[cur]:
-            return cur, touched, n_touched
+    resuming = expand >= 0
+    cur = expand
+    d = dist[expand] if resuming else 0.0
+    while resuming or size > 0:
+        if resuming:
+            resuming = False
+        else:
+            d = keys[0]
+            cur = vals[0]
+            size = _heap_pop(keys, vals, size)
+            if done[cur]:
+                continue
+            if d > max_cost:
+                break
+            done[cur] = True
+            if flat_goals[cur]:
+                return cur, touched, n_touched, keys, vals, size
         ci = cur // (ny * nz)
         cj = (cur // nz) % ny
         ck = cur % nz
@@ -146,7 +152,7 @@ def _dijkstra(
                     keys = np.concatenate((keys, np.empty_like(keys)))
                     vals = np.concatenate((vals, np.empty_like(vals)))
                 size = _heap_push(keys, vals, size, nd, idx)
-    return -1, touched, n_touched
+    return -1, touched, n_touched, keys, vals, size
 
 
 class _Workspace:
@@ -183,8 +189,10 @@ class DistanceField:
     """Shortest path lengths (metres) from one voxel through passable voxels, 26-connected.
 
     With `goals`, the search stops at the nearest goal voxel (`nearest_goal`); distances are then
-    final only for voxels no farther than that goal. Results are kept for the visited voxels only;
-    `dist_m` expands them to a grid when asked.
+    final only for voxels no farther than that goal. With `accept` as well, a goal voxel is one
+    only if `accept(voxel)` says so, asked as the search reaches it, nearest first: a test too
+    costly to run on every goal ahead of the search is run on those nearer than the answer.
+    Results are kept for the visited voxels only; `dist_m` expands them to a grid when asked.
     """
 
     def __init__(
@@ -194,6 +202,7 @@ class DistanceField:
         voxel_size: float,
         *,
         goals: BoolGrid | None = None,
+        accept: Callable[[IndexArray], bool] | None = None,
         max_cost_m: float = np.inf,
     ) -> None:
         self.shape = passable.shape
@@ -208,10 +217,22 @@ class DistanceField:
         self.voxel_size = voxel_size
         goal_mask = goals if goals is not None else np.zeros(passable.shape, dtype=np.bool_)
         ws = _workspace(int(passable.size))
-        goal, ws.touched, count = _dijkstra(
-            passable, self.start, goal_mask, _OFFSETS, _STEP_COST, max_cost_m / voxel_size,
-            ws.dist, ws.parent, ws.done, ws.touched,
-        )
+        s = int(np.ravel_multi_index(tuple(self.start), self.shape))
+        ws.dist[s] = 0.0
+        ws.touched[0] = s
+        keys = np.empty(1 << 12, dtype=np.float64)
+        vals = np.empty(1 << 12, dtype=np.int64)
+        count, size = 1, _heap_push(keys, vals, 0, 0.0, s)
+        goal = -1
+        while True:
+            goal, ws.touched, count, keys, vals, size = _dijkstra(
+                passable, goal_mask, _OFFSETS, _STEP_COST, max_cost_m / voxel_size,
+                ws.dist, ws.parent, ws.done, ws.touched, count, keys, vals, size, goal,
+            )
+            if goal < 0 or accept is None or accept(
+                np.array(np.unravel_index(goal, self.shape), dtype=np.int64)
+            ):
+                break
         visited = ws.touched[:count]
         self._index = np.sort(visited)
         self._dist_m = ws.dist[self._index] * voxel_size

@@ -74,57 +74,92 @@ def lines_clear(
 
 
 @numba.njit(cache=True)
+def _sees_one(occupied: BoolGrid, state: npt.NDArray[np.uint8], unknown: int,
+              eye: npt.NDArray[np.float64], voxel: npt.NDArray[np.int64]) -> bool:
+    """Whether the line of sight from `eye` to an unknown face neighbour of `voxel` is clear."""
+    si, sj, sk = state.shape
+    end = np.empty(3, dtype=np.float64)
+    for f in range(FACES.shape[0]):
+        i = voxel[0] + FACES[f, 0]
+        j = voxel[1] + FACES[f, 1]
+        k = voxel[2] + FACES[f, 2]
+        if not (0 <= i < si and 0 <= j < sj and 0 <= k < sk) or state[i, j, k] != unknown:
+            continue
+        end[0], end[1], end[2] = i + 0.5, j + 0.5, k + 0.5
+        if _line_clear(occupied, eye, end):
+            return True
+    return False
+
+
+@numba.njit(cache=True)
 def _sees_into_unknown(occupied: BoolGrid, state: npt.NDArray[np.uint8], unknown: int,
                        eyes: npt.NDArray[np.float64],
                        voxels: npt.NDArray[np.int64]) -> npt.NDArray[np.bool_]:
-    si, sj, sk = state.shape
     seen = np.zeros(voxels.shape[0], dtype=np.bool_)
-    end = np.empty(3, dtype=np.float64)
     for r in range(voxels.shape[0]):
-        for f in range(FACES.shape[0]):
-            i = voxels[r, 0] + FACES[f, 0]
-            j = voxels[r, 1] + FACES[f, 1]
-            k = voxels[r, 2] + FACES[f, 2]
-            if not (0 <= i < si and 0 <= j < sj and 0 <= k < sk) or state[i, j, k] != unknown:
-                continue
-            end[0], end[1], end[2] = i + 0.5, j + 0.5, k + 0.5
-            if _line_clear(occupied, eyes[r], end):
-                seen[r] = True
-                break
+        seen[r] = _sees_one(occupied, state, unknown, eyes[r], voxels[r])
     return seen
 
 
 @numba.njit(cache=True)
-def _traversable_pairs(
+def _first_in_sight(occupied: BoolGrid, state: npt.NDArray[np.uint8], unknown: int,
+                    into_unknown: bool, eyes: npt.NDArray[np.float64],
+                    aims: npt.NDArray[np.float64], targets: npt.NDArray[np.int64],
+                    rows: npt.NDArray[np.int64]) -> int:
+    """The first of `rows` whose line of sight eye -> aim is clear (and, with `into_unknown`,
+    whose eye sees into the unknown beside its target voxel); -1 if none."""
+    for r in rows:
+        if not _line_clear(occupied, eyes[r], aims[r]):
+            continue
+        if into_unknown and not _sees_one(occupied, state, unknown, eyes[r], targets[r]):
+            continue
+        return r
+    return -1
+
+
+@numba.njit(cache=True)
+def _candidate_pairs(
     traversable: BoolGrid, target_c: npt.NDArray[np.float64],
     offset_vox: npt.NDArray[np.float64], extra_c: npt.NDArray[np.float64],
-) -> npt.NDArray[np.int64]:
-    """Indices of the (eye, target) pairs whose eye voxel is inside the grid and traversable.
+    voxel_size: float, max_elevation_rad: float, max_range_m: float,
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+    """The (eye, target) pairs whose eye voxel is inside the grid and traversable, and whose
+    target is within the elevation and the range: (P,) the target of each (an index into
+    `target_c`) and (P, 3) its eye (voxel units, not snapped to the voxel's centre).
 
-    Pairs are numbered as `frontier_viewpoints` orders them: `extra_c[e]` with `target_c[t]` is
-    pair e * T + t; `target_c[t] + offset_vox[o]` with `target_c[t]` is E * T + t * O + o."""
+    Pairs come in `frontier_viewpoints`' order: each of `extra_c` with every target, then every
+    target with every offset."""
     n_t, n_o, n_e = target_c.shape[0], offset_vox.shape[0], extra_c.shape[0]
     si, sj, sk = traversable.shape
-    out = np.empty(n_e * n_t + n_t * n_o, dtype=np.int64)
+    out_t = np.empty(n_e * n_t + n_t * n_o, dtype=np.int64)
+    out_eye = np.empty((n_e * n_t + n_t * n_o, 3), dtype=np.float64)
+    eye = np.empty(3, dtype=np.float64)
     n = 0
-    for e in range(n_e):
-        i = int(np.floor(extra_c[e, 0]))
-        j = int(np.floor(extra_c[e, 1]))
-        k = int(np.floor(extra_c[e, 2]))
-        if 0 <= i < si and 0 <= j < sj and 0 <= k < sk and traversable[i, j, k]:
-            for t in range(n_t):
-                out[n] = e * n_t + t
+    for block in range(2):
+        for a in range(n_e if block == 0 else n_t):
+            for b in range(n_t if block == 0 else n_o):
+                t = b if block == 0 else a
+                if block == 0:
+                    eye[0], eye[1], eye[2] = extra_c[a, 0], extra_c[a, 1], extra_c[a, 2]
+                else:
+                    eye[0] = target_c[t, 0] + offset_vox[b, 0]
+                    eye[1] = target_c[t, 1] + offset_vox[b, 1]
+                    eye[2] = target_c[t, 2] + offset_vox[b, 2]
+                i, j, k = int(np.floor(eye[0])), int(np.floor(eye[1])), int(np.floor(eye[2]))
+                if not (0 <= i < si and 0 <= j < sj and 0 <= k < sk) or not traversable[i, j, k]:
+                    continue
+                dx = (target_c[t, 0] - eye[0]) * voxel_size
+                dy = (target_c[t, 1] - eye[1]) * voxel_size
+                dz = (target_c[t, 2] - eye[2]) * voxel_size
+                flat = dx * dx + dy * dy
+                if np.arctan2(abs(dz), np.sqrt(flat)) > max_elevation_rad:
+                    continue
+                if np.sqrt(flat + dz * dz) > max_range_m:
+                    continue
+                out_t[n] = t
+                out_eye[n, 0], out_eye[n, 1], out_eye[n, 2] = eye[0], eye[1], eye[2]
                 n += 1
-    base = n_e * n_t
-    for t in range(n_t):
-        for o in range(n_o):
-            i = int(np.floor(target_c[t, 0] + offset_vox[o, 0]))
-            j = int(np.floor(target_c[t, 1] + offset_vox[o, 1]))
-            k = int(np.floor(target_c[t, 2] + offset_vox[o, 2]))
-            if 0 <= i < si and 0 <= j < sj and 0 <= k < sk and traversable[i, j, k]:
-                out[n] = base + t * n_o + o
-                n += 1
-    return out[:n]
+    return out_t[:n], out_eye[:n]
 
 
 def ring_offsets(distances_m: tuple[float, ...], heights_m: tuple[float, ...],
@@ -135,6 +170,113 @@ def ring_offsets(distances_m: tuple[float, ...], heights_m: tuple[float, ...],
         (d * np.cos(a), d * np.sin(a), h) for d in distances_m for h in heights_m for a in angles
     ]
     return np.array(rows, dtype=np.float64)
+
+
+class ViewpointCandidates:
+    """The candidate viewpoints of up to `samples_per_cluster` voxels of each cluster, with the
+    costly test, the line of sight, run only where asked: for every candidate (`all`), or for
+    the candidates at one eye voxel (`first_at`), as a search reaches them nearest first.
+
+    Args:
+        offsets_m: (R, 3) candidate offsets from a frontier voxel centre.
+        excluded: frontier voxels to skip (e.g. targets given up on).
+        extra: (E, 3) voxels tried as viewpoints of every sampled frontier voxel besides the
+            ring (e.g. the vehicle's own, so that turning on the spot is an option).
+        into_unknown: keep only viewpoints that also see into an unknown face neighbour of
+            their frontier voxel (`sees_into_unknown`).
+
+    Attributes:
+        eyes: (nx, ny, nz) True on every voxel with a candidate before the line-of-sight test.
+    """
+
+    def __init__(
+        self,
+        view: MapView,
+        clusters: list[FrontierCluster],
+        offsets_m: npt.NDArray[np.float64],
+        *,
+        samples_per_cluster: int,
+        max_elevation_rad: float,
+        max_range_m: float,
+        excluded: BoolGrid | None = None,
+        extra: IndexArray | None = None,
+        into_unknown: bool = False,
+    ) -> None:
+        self._view = view
+        self._into_unknown = into_unknown
+        targets, ids = [], []
+        for cluster in clusters:
+            idx = cluster.indices
+            if excluded is not None:
+                idx = idx[~excluded[idx[:, 0], idx[:, 1], idx[:, 2]]]
+            if len(idx) == 0:
+                continue
+            pick = np.unique(np.linspace(0, len(idx) - 1, samples_per_cluster).astype(np.int64))
+            targets.append(idx[pick])
+            ids.append(np.full(len(pick), cluster.id, dtype=np.int64))
+        target_idx = np.concatenate(targets) if targets else np.zeros((0, 3), dtype=np.int64)
+        target_ids = np.concatenate(ids) if ids else np.zeros(0, dtype=np.int64)
+        # The (eye, frontier voxel) pairs, in voxel units with voxel centres at +0.5: each
+        # `extra` voxel with every target, then every target with every ring offset. Only the
+        # pairs whose eye is a traversable voxel are made; a whole-array pass over every pair
+        # cost more than the rest of a Classic plan on the large areas.
+        target_c: npt.NDArray[np.float64] = np.add(target_idx, 0.5, dtype=np.float64)
+        extra_c = (np.asarray(extra, dtype=np.float64) + 0.5 if extra is not None and len(extra)
+                   else np.zeros((0, 3), dtype=np.float64))
+        pair_t, eye_c = _candidate_pairs(
+            view.traversable, target_c, np.ascontiguousarray(offsets_m / view.voxel_size),
+            extra_c, view.voxel_size, max_elevation_rad, max_range_m,
+        )
+        self._voxels = np.floor(eye_c).astype(np.int64)
+        self._eyes_c: npt.NDArray[np.float64] = np.add(self._voxels, 0.5, dtype=np.float64)
+        self._aims: npt.NDArray[np.float64] = target_c[pair_t]
+        self._targets = target_idx[pair_t]
+        self._ids = target_ids[pair_t]
+        # Candidates grouped by eye voxel, each group in candidate order.
+        flat = np.ravel_multi_index(tuple(self._voxels.T), view.shape)
+        self._by_eye = np.argsort(flat, kind="stable")
+        self._eye_flat = flat[self._by_eye]
+        self.eyes = np.zeros(view.shape, dtype=np.bool_)
+        self.eyes.flat[flat] = True
+        self._first: dict[int, int] = {}
+
+    def __len__(self) -> int:
+        """Candidates before the line-of-sight test."""
+        return len(self._voxels)
+
+    def first_at(self, voxel: IndexArray) -> int:
+        """The first candidate at eye `voxel` (3,) that passes the line-of-sight test, as an
+        index into `all`'s order before filtering; -1 if none does."""
+        flat = int(np.ravel_multi_index(tuple(voxel), self._view.shape))
+        if flat not in self._first:
+            lo, hi = np.searchsorted(self._eye_flat, [flat, flat + 1])
+            rows = self._by_eye[lo:hi]  # a stable sort: in candidate order
+            view = self._view
+            self._first[flat] = _first_in_sight(
+                view.occupied, view.state, int(VoxelState.UNKNOWN), self._into_unknown,
+                self._eyes_c, self._aims, self._targets, rows,
+            )
+        return self._first[flat]
+
+    def accepts(self, voxel: IndexArray) -> bool:
+        """Whether a candidate at eye `voxel` passes the line-of-sight test."""
+        return self.first_at(voxel) >= 0
+
+    def target_at(self, voxel: IndexArray) -> IndexArray:
+        """(3,) the frontier voxel of the first candidate at `voxel` that passes the test."""
+        row = self.first_at(voxel)
+        if row < 0:
+            raise ValueError(f"no viewpoint at {voxel.tolist()}")
+        return self._targets[row]
+
+    def all(self) -> Viewpoints:
+        """Every candidate that passes the line-of-sight test, in order."""
+        rows = np.arange(len(self._voxels))
+        if len(rows):
+            rows = rows[lines_clear(self._view.occupied, self._eyes_c, self._aims)]
+        if self._into_unknown and len(rows):
+            rows = rows[sees_into_unknown(self._view, self._eyes_c[rows], self._targets[rows])]
+        return Viewpoints(self._voxels[rows], self._targets[rows], self._ids[rows])
 
 
 def frontier_viewpoints(
@@ -149,66 +291,13 @@ def frontier_viewpoints(
     extra: IndexArray | None = None,
     into_unknown: bool = False,
 ) -> Viewpoints:
-    """Viewpoints for up to `samples_per_cluster` voxels of each cluster.
-
-    Args:
-        offsets_m: (R, 3) candidate offsets from a frontier voxel centre.
-        excluded: frontier voxels to skip (e.g. targets given up on).
-        extra: (E, 3) voxels tried as viewpoints of every sampled frontier voxel besides the
-            ring (e.g. the vehicle's own, so that turning on the spot is an option).
-        into_unknown: keep only viewpoints that also see into an unknown face neighbour of
-            their frontier voxel (`sees_into_unknown`).
-    """
-    targets, ids = [], []
-    for cluster in clusters:
-        idx = cluster.indices
-        if excluded is not None:
-            idx = idx[~excluded[idx[:, 0], idx[:, 1], idx[:, 2]]]
-        if len(idx) == 0:
-            continue
-        pick = np.unique(np.linspace(0, len(idx) - 1, samples_per_cluster).astype(np.int64))
-        targets.append(idx[pick])
-        ids.append(np.full(len(pick), cluster.id, dtype=np.int64))
-    empty = np.zeros((0, 3), dtype=np.int64)
-    if not targets:
-        return Viewpoints(empty, empty, np.zeros(0, dtype=np.int64))
-    target_idx = np.concatenate(targets)
-    target_ids = np.concatenate(ids)
-    vs = view.voxel_size
-    offset_vox = offsets_m / vs
-    # The (eye, frontier voxel) pairs, in voxel units with voxel centres at +0.5: each `extra`
-    # voxel with every target, then every target with every ring offset. Only the pairs whose
-    # eye is a traversable voxel are made; a whole-array pass over every pair cost more than
-    # the rest of a Classic plan on the large areas.
-    target_c = target_idx.astype(np.float64) + 0.5
-    extra_c = (np.asarray(extra, dtype=np.float64) + 0.5 if extra is not None and len(extra)
-               else np.zeros((0, 3), dtype=np.float64))
-    kept = _traversable_pairs(view.traversable, target_c, offset_vox, extra_c)
-    n_extra = len(extra_c) * len(target_c)
-    from_extra = kept < n_extra
-    ring = kept[~from_extra] - n_extra
-    pair_t = np.concatenate([kept[from_extra] % len(target_c), ring // len(offset_vox)])
-    cand_c = np.concatenate([extra_c[kept[from_extra] // len(target_c)],
-                             target_c[ring // len(offset_vox)]
-                             + offset_vox[ring % len(offset_vox)]])
-    cand = np.floor(cand_c).astype(np.int64)
-    tgt_c = target_c[pair_t]
-    rep_targets = target_idx[pair_t]
-    rep_ids = target_ids[pair_t]
-    delta = (tgt_c - cand_c) * vs
-    horizontal = np.linalg.norm(delta[:, :2], axis=1)
-    ok = np.arctan2(np.abs(delta[:, 2]), horizontal) <= max_elevation_rad
-    ok &= np.linalg.norm(delta, axis=1) <= max_range_m
-    cand, cand_c, tgt_c, rep_targets, rep_ids = (
-        cand[ok], cand_c[ok], tgt_c[ok], rep_targets[ok], rep_ids[ok]
-    )
-    if len(cand):
-        clear = lines_clear(view.occupied, np.floor(cand_c) + 0.5, tgt_c)
-        cand, rep_targets, rep_ids = cand[clear], rep_targets[clear], rep_ids[clear]
-    if into_unknown and len(cand):
-        into = sees_into_unknown(view, cand.astype(np.float64) + 0.5, rep_targets)
-        cand, rep_targets, rep_ids = cand[into], rep_targets[into], rep_ids[into]
-    return Viewpoints(cand, rep_targets, rep_ids)
+    """Viewpoints for up to `samples_per_cluster` voxels of each cluster: every candidate of
+    `ViewpointCandidates` (same arguments) that passes the line-of-sight test."""
+    return ViewpointCandidates(
+        view, clusters, offsets_m, samples_per_cluster=samples_per_cluster,
+        max_elevation_rad=max_elevation_rad, max_range_m=max_range_m, excluded=excluded,
+        extra=extra, into_unknown=into_unknown,
+    ).all()
 
 
 def sees_into_unknown(view: MapView, eyes: npt.NDArray[np.float64],

@@ -211,6 +211,48 @@ def test_blocked_goal_is_skipped_for_a_reachable_one() -> None:
     np.testing.assert_array_equal(field.nearest_goal, [7, 1, 1])
 
 
+
+@pytest.mark.parametrize("seed", range(4))
+def test_goals_turned_down_as_reached_give_the_field_of_the_accepted_goals(seed: int) -> None:
+    """A goal `accept` turns down is searched on through as a plain voxel: the field, the goal
+    found and its path are those of a search given only the accepted goals."""
+    rng = np.random.default_rng(seed)
+    passable = rng.random((24, 20, 6)) > 0.25
+    start = np.argwhere(passable)[0]
+    goals = passable & (rng.random(passable.shape) < 0.05)
+    accepted = goals & (rng.random(passable.shape) < 0.2)
+    nearest = DistanceField(passable, start, VOXEL, goals=goals).nearest_goal
+    assert nearest is not None
+    accepted[tuple(nearest)] = False  # at least one goal is turned down
+    asked: list[tuple[int, ...]] = []
+
+    def accept(voxel: npt.NDArray[np.int64]) -> bool:
+        asked.append(tuple(int(v) for v in voxel))
+        return bool(accepted[tuple(voxel)])
+
+    lazy = DistanceField(passable, start, VOXEL, goals=goals, accept=accept)
+    eager = DistanceField(passable, start, VOXEL, goals=accepted)
+    assert eager.nearest_goal is not None
+    np.testing.assert_array_equal(lazy.nearest_goal, eager.nearest_goal)
+    np.testing.assert_array_equal(lazy.dist_m, eager.dist_m)
+    np.testing.assert_array_equal(lazy.path_to(eager.nearest_goal),
+                                  eager.path_to(eager.nearest_goal))
+    # Asked nearest first, each goal once, and none beyond the answer.
+    assert len(set(asked)) == len(asked) > 1
+    assert asked[-1] == tuple(int(v) for v in eager.nearest_goal)
+    distances = [lazy.dist_m[v] for v in asked]
+    assert distances == sorted(distances)
+
+
+def test_no_accepted_goal_searches_everything_reachable() -> None:
+    passable = np.ones((8, 8, 3), dtype=bool)
+    goals = np.zeros(passable.shape, dtype=bool)
+    goals[::3, ::3, :] = True
+    field = DistanceField(passable, (0, 0, 0), VOXEL, goals=goals, accept=lambda v: False)
+    assert field.nearest_goal is None
+    assert np.isfinite(field.dist_m).all()
+
+
 # -- corners -------------------------------------------------------------------------------------
 
 

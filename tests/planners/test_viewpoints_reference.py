@@ -12,6 +12,7 @@ import pytest
 from planners.classic import ClassicConfig
 from planners.viewpoints import (
     FACES,
+    ViewpointCandidates,
     Viewpoints,
     frontier_viewpoints,
     lines_clear,
@@ -120,3 +121,34 @@ def test_sight_into_the_unknown_matches_the_brute_force_reference(make_stack: St
     expected = _sees_reference(view, eyes, voxels)
     assert 0 < np.count_nonzero(expected) < len(expected)
     np.testing.assert_array_equal(sees_into_unknown(view, eyes, voxels), expected)
+
+
+@pytest.mark.parametrize(("seed", "into_unknown"), [(0, False), (1, True), (2, True)])
+def test_candidates_tested_one_eye_at_a_time_agree_with_all_tested(
+        make_stack: StackFactory, seed: int, into_unknown: bool) -> None:
+    """`first_at` an eye voxel is the first viewpoint of `all` standing there, and -1 exactly
+    where `all` has none: the search that tests eyes as it reaches them picks what a search
+    over every tested viewpoint picks."""
+    rng = np.random.default_rng(200 + seed)
+    shape = (36, 30, 16)
+    state = np.full(shape, VoxelState.FREE, dtype=np.uint8)
+    state[rng.random(shape) < 0.006] = VoxelState.OCCUPIED
+    for _ in range(4):
+        lo = rng.integers(0, np.array(shape) - 6)
+        state[tuple(slice(a, a + int(rng.integers(3, 7))) for a in lo)] = VoxelState.UNKNOWN
+    view = make_stack(state, 0.1, 0.2).view()
+    cfg = ClassicConfig()
+    offsets = ring_offsets(cfg.view_distances_m, cfg.view_height_offsets_m, cfg.view_directions)
+    candidates = ViewpointCandidates(
+        view, view.frontier_clusters(1), offsets, samples_per_cluster=cfg.samples_per_cluster,
+        max_elevation_rad=np.radians(cfg.max_view_elevation_deg), max_range_m=3.0,
+        into_unknown=into_unknown)
+    tested = candidates.all()
+    eyes = np.argwhere(candidates.eyes)
+    assert len(tested) > 100 and len(eyes) > len(np.unique(tested.voxels, axis=0)), (
+        "the map leaves no eye whose every candidate fails the sight test")
+    for eye in eyes:
+        at = np.flatnonzero(np.all(tested.voxels == eye, axis=1))
+        assert candidates.accepts(eye) == (len(at) > 0)
+        if len(at):
+            np.testing.assert_array_equal(candidates.target_at(eye), tested.targets[at[0]])
