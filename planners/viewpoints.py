@@ -103,15 +103,22 @@ def _sees_into_unknown(occupied: BoolGrid, state: npt.NDArray[np.uint8], unknown
 
 @numba.njit(cache=True)
 def _first_in_sight(occupied: BoolGrid, state: npt.NDArray[np.uint8], unknown: int,
-                    into_unknown: bool, eyes: npt.NDArray[np.float64],
-                    aims: npt.NDArray[np.float64], targets: npt.NDArray[np.int64],
+                    into_unknown: bool, eyes: npt.NDArray[np.int64],
+                    targets: npt.NDArray[np.int64], pair_t: npt.NDArray[np.int64],
                     rows: npt.NDArray[np.int64]) -> int:
-    """The first of `rows` whose line of sight eye -> aim is clear (and, with `into_unknown`,
-    whose eye sees into the unknown beside its target voxel); -1 if none."""
+    """The first of `rows` whose line of sight from its eye voxel's centre to its target
+    voxel's centre (`targets[pair_t[r]]`) is clear (and, with `into_unknown`, whose eye sees
+    into the unknown beside the target); -1 if none."""
+    eye = np.empty(3, dtype=np.float64)
+    aim = np.empty(3, dtype=np.float64)
     for r in rows:
-        if not _line_clear(occupied, eyes[r], aims[r]):
+        t = pair_t[r]
+        for a in range(3):
+            eye[a] = eyes[r, a] + 0.5
+            aim[a] = targets[t, a] + 0.5
+        if not _line_clear(occupied, eye, aim):
             continue
-        if into_unknown and not _sees_one(occupied, state, unknown, eyes[r], targets[r]):
+        if into_unknown and not _sees_one(occupied, state, unknown, eye, targets[t]):
             continue
         return r
     return -1
@@ -121,18 +128,18 @@ def _first_in_sight(occupied: BoolGrid, state: npt.NDArray[np.uint8], unknown: i
 def _candidate_pairs(
     traversable: BoolGrid, target_c: npt.NDArray[np.float64],
     offset_vox: npt.NDArray[np.float64], extra_c: npt.NDArray[np.float64],
-    voxel_size: float, max_elevation_rad: float, max_range_m: float,
-) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+    voxel_size: float, max_elevation_rad: float, max_range_m: float, eyes: BoolGrid,
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """The (eye, target) pairs whose eye voxel is inside the grid and traversable, and whose
     target is within the elevation and the range: (P,) the target of each (an index into
-    `target_c`) and (P, 3) its eye (voxel units, not snapped to the voxel's centre).
+    `target_c`) and (P, 3) its eye voxel. Sets each eye voxel in `eyes`.
 
     Pairs come in `frontier_viewpoints`' order: each of `extra_c` with every target, then every
     target with every offset."""
     n_t, n_o, n_e = target_c.shape[0], offset_vox.shape[0], extra_c.shape[0]
     si, sj, sk = traversable.shape
     out_t = np.empty(n_e * n_t + n_t * n_o, dtype=np.int64)
-    out_eye = np.empty((n_e * n_t + n_t * n_o, 3), dtype=np.float64)
+    out_eye = np.empty((n_e * n_t + n_t * n_o, 3), dtype=np.int64)
     eye = np.empty(3, dtype=np.float64)
     n = 0
     for block in range(2):
@@ -157,9 +164,42 @@ def _candidate_pairs(
                 if np.sqrt(flat + dz * dz) > max_range_m:
                     continue
                 out_t[n] = t
-                out_eye[n, 0], out_eye[n, 1], out_eye[n, 2] = eye[0], eye[1], eye[2]
+                out_eye[n, 0], out_eye[n, 1], out_eye[n, 2] = i, j, k
+                eyes[i, j, k] = True
                 n += 1
     return out_t[:n], out_eye[:n]
+
+
+def _sampled(clusters: list[FrontierCluster], samples: int,
+             excluded: BoolGrid | None) -> tuple[IndexArray, npt.NDArray[np.int64]]:
+    """Up to `samples` voxels of each cluster (of those not `excluded`), evenly spaced in the
+    cluster's order as `np.unique(np.linspace(0, n - 1, samples).astype(int))` picks them, and
+    the cluster id of each."""
+    none = np.zeros((0, 3), dtype=np.int64), np.zeros(0, dtype=np.int64)
+    if not clusters:
+        return none
+    voxels = np.concatenate([c.indices for c in clusters])
+    owner = np.repeat(np.arange(len(clusters)), [len(c.indices) for c in clusters])
+    if excluded is not None:
+        keep = ~excluded[voxels[:, 0], voxels[:, 1], voxels[:, 2]]
+        voxels, owner = voxels[keep], owner[keep]
+    if len(owner) == 0:
+        return none
+    # `owner` is sorted: each remaining cluster's first row and size.
+    kept, first, counts = np.unique(owner, return_index=True, return_counts=True)
+    # np.linspace(0, n - 1, samples) is i * ((n - 1) / (samples - 1)), the last exactly n - 1.
+    if samples > 1:
+        step = (counts - 1).astype(np.float64) / float(samples - 1)
+        at = np.arange(samples, dtype=np.float64)[None, :] * step[:, None]
+        at[:, -1] = counts - 1
+    else:
+        at = np.zeros((len(kept), 1))
+    pick = at.astype(np.int64)
+    # Each row is non-decreasing: `unique` keeps the first of each run.
+    new = np.ones(pick.shape, dtype=np.bool_)
+    new[:, 1:] = pick[:, 1:] != pick[:, :-1]
+    ids = np.array([c.id for c in clusters], dtype=np.int64)[kept]
+    return voxels[(first[:, None] + pick)[new]], np.broadcast_to(ids[:, None], pick.shape)[new]
 
 
 def ring_offsets(distances_m: tuple[float, ...], heights_m: tuple[float, ...],
@@ -204,40 +244,24 @@ class ViewpointCandidates:
     ) -> None:
         self._view = view
         self._into_unknown = into_unknown
-        targets, ids = [], []
-        for cluster in clusters:
-            idx = cluster.indices
-            if excluded is not None:
-                idx = idx[~excluded[idx[:, 0], idx[:, 1], idx[:, 2]]]
-            if len(idx) == 0:
-                continue
-            pick = np.unique(np.linspace(0, len(idx) - 1, samples_per_cluster).astype(np.int64))
-            targets.append(idx[pick])
-            ids.append(np.full(len(pick), cluster.id, dtype=np.int64))
-        target_idx = np.concatenate(targets) if targets else np.zeros((0, 3), dtype=np.int64)
-        target_ids = np.concatenate(ids) if ids else np.zeros(0, dtype=np.int64)
+        self._target_idx, self._target_ids = _sampled(clusters, samples_per_cluster, excluded)
         # The (eye, frontier voxel) pairs, in voxel units with voxel centres at +0.5: each
         # `extra` voxel with every target, then every target with every ring offset. Only the
         # pairs whose eye is a traversable voxel are made; a whole-array pass over every pair
         # cost more than the rest of a Classic plan on the large areas.
-        target_c: npt.NDArray[np.float64] = np.add(target_idx, 0.5, dtype=np.float64)
+        target_c: npt.NDArray[np.float64] = np.add(self._target_idx, 0.5, dtype=np.float64)
         extra_c = (np.asarray(extra, dtype=np.float64) + 0.5 if extra is not None and len(extra)
                    else np.zeros((0, 3), dtype=np.float64))
-        pair_t, eye_c = _candidate_pairs(
-            view.traversable, target_c, np.ascontiguousarray(offsets_m / view.voxel_size),
-            extra_c, view.voxel_size, max_elevation_rad, max_range_m,
-        )
-        self._voxels = np.floor(eye_c).astype(np.int64)
-        self._eyes_c: npt.NDArray[np.float64] = np.add(self._voxels, 0.5, dtype=np.float64)
-        self._aims: npt.NDArray[np.float64] = target_c[pair_t]
-        self._targets = target_idx[pair_t]
-        self._ids = target_ids[pair_t]
-        # Candidates grouped by eye voxel, each group in candidate order.
-        flat = np.ravel_multi_index(tuple(self._voxels.T), view.shape)
-        self._by_eye = np.argsort(flat, kind="stable")
-        self._eye_flat = flat[self._by_eye]
         self.eyes = np.zeros(view.shape, dtype=np.bool_)
-        self.eyes.flat[flat] = True
+        self._pair_t, self._voxels = _candidate_pairs(
+            view.traversable, target_c, np.ascontiguousarray(offsets_m / view.voxel_size),
+            extra_c, view.voxel_size, max_elevation_rad, max_range_m, self.eyes,
+        )
+        # Candidates grouped by eye voxel, each group in candidate order: the keys (eye voxel,
+        # then candidate) are unique, so any sort gives that order.
+        n = max(len(self._voxels), 1)
+        flat = np.ravel_multi_index(tuple(self._voxels.T), view.shape)
+        self._by_eye = np.sort(flat * n + np.arange(len(self._voxels)))
         self._first: dict[int, int] = {}
 
     def __len__(self) -> int:
@@ -249,12 +273,12 @@ class ViewpointCandidates:
         index into `all`'s order before filtering; -1 if none does."""
         flat = int(np.ravel_multi_index(tuple(voxel), self._view.shape))
         if flat not in self._first:
-            lo, hi = np.searchsorted(self._eye_flat, [flat, flat + 1])
-            rows = self._by_eye[lo:hi]  # a stable sort: in candidate order
+            n = max(len(self._voxels), 1)
+            lo, hi = np.searchsorted(self._by_eye, [flat * n, (flat + 1) * n])
             view = self._view
             self._first[flat] = _first_in_sight(
                 view.occupied, view.state, int(VoxelState.UNKNOWN), self._into_unknown,
-                self._eyes_c, self._aims, self._targets, rows,
+                self._voxels, self._target_idx, self._pair_t, self._by_eye[lo:hi] % n,
             )
         return self._first[flat]
 
@@ -267,16 +291,19 @@ class ViewpointCandidates:
         row = self.first_at(voxel)
         if row < 0:
             raise ValueError(f"no viewpoint at {voxel.tolist()}")
-        return self._targets[row]
+        return self._target_idx[self._pair_t[row]]
 
     def all(self) -> Viewpoints:
         """Every candidate that passes the line-of-sight test, in order."""
         rows = np.arange(len(self._voxels))
+        targets = self._target_idx[self._pair_t]
+        eyes_c: npt.NDArray[np.float64] = np.add(self._voxels, 0.5, dtype=np.float64)
         if len(rows):
-            rows = rows[lines_clear(self._view.occupied, self._eyes_c, self._aims)]
+            aims: npt.NDArray[np.float64] = np.add(targets, 0.5, dtype=np.float64)
+            rows = rows[lines_clear(self._view.occupied, eyes_c, aims)]
         if self._into_unknown and len(rows):
-            rows = rows[sees_into_unknown(self._view, self._eyes_c[rows], self._targets[rows])]
-        return Viewpoints(self._voxels[rows], self._targets[rows], self._ids[rows])
+            rows = rows[sees_into_unknown(self._view, eyes_c[rows], targets[rows])]
+        return Viewpoints(self._voxels[rows], targets[rows], self._target_ids[self._pair_t[rows]])
 
 
 def frontier_viewpoints(

@@ -14,6 +14,7 @@ from planners.viewpoints import (
     FACES,
     ViewpointCandidates,
     Viewpoints,
+    _sampled,
     frontier_viewpoints,
     lines_clear,
     ring_offsets,
@@ -152,3 +153,43 @@ def test_candidates_tested_one_eye_at_a_time_agree_with_all_tested(
         assert candidates.accepts(eye) == (len(at) > 0)
         if len(at):
             np.testing.assert_array_equal(candidates.target_at(eye), tested.targets[at[0]])
+
+
+def _sampled_reference(clusters: list[FrontierCluster], samples: int,
+                       excluded: npt.NDArray[np.bool_] | None
+                       ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    voxels, ids = [np.zeros((0, 3), dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
+    for cluster in clusters:
+        idx = cluster.indices
+        if excluded is not None:
+            idx = idx[~excluded[tuple(idx.T)]]
+        if len(idx):
+            pick = np.unique(np.linspace(0, len(idx) - 1, samples).astype(np.int64))
+            voxels.append(idx[pick])
+            ids.append(np.full(len(pick), cluster.id))
+    return np.concatenate(voxels), np.concatenate(ids)
+
+
+@pytest.mark.parametrize("samples", [1, 2, 5, 16])
+def test_sampled_voxels_are_the_linspace_picks_of_each_cluster(samples: int) -> None:
+    """The voxels sampled from every cluster at once are, cluster by cluster, the ones
+    `np.unique(np.linspace(0, n - 1, samples).astype(int))` picks from its voxels not
+    excluded; clusters left empty drop out."""
+    rng = np.random.default_rng(samples)
+    shape = (40, 40, 10)
+    excluded = rng.random(shape) < 0.3
+    clusters = []
+    for cid, size in enumerate([1, 2, 3, 15, 16, 17, 40, 500, 1, 7]):
+        flat = np.sort(rng.choice(np.prod(shape), size, replace=False))
+        indices = np.stack(np.unravel_index(flat, shape), axis=1).astype(np.int64)
+        if cid == 9:
+            excluded[tuple(indices.T)] = True  # wholly given up
+        clusters.append(FrontierCluster(id=cid, indices=indices, centroid=np.zeros(3),
+                                        normal=np.zeros(3), size=size))
+    for mask in (excluded, None):
+        voxels, ids = _sampled(clusters, samples, mask)
+        want_voxels, want_ids = _sampled_reference(clusters, samples, mask)
+        np.testing.assert_array_equal(voxels, want_voxels)
+        np.testing.assert_array_equal(ids, want_ids)
+    assert _sampled([], samples, None)[0].shape == (0, 3)
+    assert len(_sampled(clusters[9:], samples, excluded)[1]) == 0
