@@ -33,9 +33,13 @@ from sim.safety_monitor import SafetyMonitor
 from sim.sensing import RandomStreams, Sensing
 from sim.stage_costs import StageCosts
 from sim.trajectory import TrajectorySample
+from sim.tsdf import surface_block_count
 from sim.world import World
 
 __all__ = ["EpisodeLoop", "PlanReply", "PlanRequest", "call_planner"]
+
+# Surface samples of the ground truth that size the TSDF's block table.
+TSDF_ESTIMATE_POINTS = 200_000
 
 
 @dataclass(frozen=True)
@@ -98,7 +102,11 @@ class EpisodeLoop:
         self.wall0 = time.perf_counter()
         self.streams = RandomStreams.from_seed(seed)
         self.costs = StageCosts()
-        self.sensing = Sensing(area, config, self.streams, self.costs)
+        # The TSDF's block table is sized for the area's surface at the start (see
+        # `sim.tsdf.EXPECTED_BLOCK_MARGIN`); 200,000 samples count its blocks to within 2 %.
+        expected_blocks = surface_block_count(
+            ground_truth.surface.sample(TSDF_ESTIMATE_POINTS), config.tsdf)
+        self.sensing = Sensing(area, config, self.streams, self.costs, expected_blocks)
         self.checker = PlanChecker(area, config, self.sensing.mapping)
         self.monitor = SafetyMonitor(config, self.sensing.mapping, self.costs)
         self.world = World(area.vertices, area.triangles, area.start.position, config.limits,

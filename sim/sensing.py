@@ -42,13 +42,14 @@ class Sensing:
     """The depth camera, the odometry estimate and the maps it feeds (occupancy, TSDF)."""
 
     def __init__(self, area: Area, config: EpisodeConfig, streams: RandomStreams,
-                 costs: StageCosts) -> None:
+                 costs: StageCosts, expected_tsdf_blocks: int = 0) -> None:
         self.cfg, self.costs = config, costs
         cam = config.camera
         self.camera = DepthCamera(area.vertices, area.triangles, cam)
         self.mapping = MappingStack(area.bounds_min, area.grid_shape, area.voxel_size,
                                     config.safety_radius_m, config.occupancy)
-        self.tsdf = TsdfVolume(cam.intrinsic_matrix(), cam.max_range_m, config.tsdf)
+        self.tsdf = TsdfVolume(cam.intrinsic_matrix(), cam.max_range_m, config.tsdf,
+                               expected_tsdf_blocks)
         self.drift = OdometryDrift(config.odometry_noise, streams.odometry)
         self._depth_rng = streams.depth
         self.frame_index = 0

@@ -17,6 +17,11 @@ from sim.tsdf_slabs import block_grid, mesh_in_slabs
 # (4 KiB each, zeroed): a FACILITY C run that needed 42,800 blocks held 80,000, and for the
 # doubling the old table and the new one at once. The table grows by this factor instead.
 BLOCK_GROWTH = 1.25
+# The table made at the start holds the blocks the area's surface is expected to need
+# (`surface_block_count`) times this, so that a run seldom grows it: each growth holds both
+# tables at once (the largest rise of a FACILITY C run's memory) and costs about a second.
+# The margin leaves room for a frame's blocks, which `_make_room` counts whole.
+EXPECTED_BLOCK_MARGIN = 1.1
 # Points expected per block in an extraction, over the last extraction's ratio (which stays
 # within a few percent from one snapshot to the next on the built-in areas).
 POINT_ESTIMATE_MARGIN = 1.25
@@ -34,15 +39,40 @@ class TsdfConfig(BaseModel):
     weight_threshold: float = Field(1.0, ge=0.0, description="min weight for extracted surface")
 
 
+def surface_block_count(points: npt.ArrayLike, config: TsdfConfig) -> int:
+    """How many voxel blocks lie within the truncation distance of `points` ((N, 3) metres,
+    dense samples of a surface): about how many a TSDF fusing views of that surface allocates
+    (Open3D allocates the blocks within the truncation of each depth return). Each point
+    counts the blocks of the corners of the cube of half-width the truncation around it."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(pts) == 0:
+        return 0
+    block = config.voxel_size_m * config.block_resolution
+    trunc = config.voxel_size_m * config.trunc_voxel_multiplier
+    lo = np.floor((pts.min(axis=0) - trunc) / block).astype(np.int64)
+    span = np.floor((pts.max(axis=0) + trunc) / block).astype(np.int64) - lo + 1
+    keys = []
+    for corner in np.array(np.meshgrid(*[(-trunc, trunc)] * 3)).reshape(3, -1).T:
+        b = np.floor((pts + corner) / block).astype(np.int64) - lo
+        keys.append((b[:, 0] * span[1] + b[:, 1]) * span[2] + b[:, 2])
+    return len(np.unique(np.concatenate(keys)))
+
+
 class TsdfVolume:
     """Fuses depth frames; extracts point clouds and meshes of the zero level set."""
 
-    def __init__(self, intrinsic: FloatArray, max_range_m: float, config: TsdfConfig) -> None:
+    def __init__(self, intrinsic: FloatArray, max_range_m: float, config: TsdfConfig,
+                 expected_blocks: int = 0) -> None:
+        """`expected_blocks`: how many blocks the run is expected to fuse (0: unknown); the
+        table starts with room for them. Which slot holds a block changes nothing a run
+        computes (see `_make_room`)."""
         self.config = config
         self._intrinsic = o3c.Tensor(np.asarray(intrinsic, dtype=np.float64))
         self._max_range = float(max_range_m)
-        self._grid = block_grid(config.voxel_size_m, config.block_resolution,
-                                config.initial_block_count)
+        self._grid = block_grid(
+            config.voxel_size_m, config.block_resolution,
+            max(config.initial_block_count, math.ceil(expected_blocks * EXPECTED_BLOCK_MARGIN)),
+        )
         self.frames = 0
         self._points_per_block = 0.0  # of the last extraction, for the next one's estimate
 

@@ -63,10 +63,10 @@ def test_sdf_recall_agrees_with_point_recall(fused: tuple[TsdfVolume, np.ndarray
     assert sdf_surface_recall(off, off_w, 0.05, 1.0) == 0.0
 
 
-def _box_flight(config: TsdfConfig) -> TsdfVolume:
+def _box_flight(config: TsdfConfig, expected_blocks: int = 0) -> TsdfVolume:
     vertices, triangles = _box((6.0, 5.0, 2.5))
     camera = DepthCamera(vertices, triangles)
-    volume = TsdfVolume(camera.config.intrinsic_matrix(), 5.0, config)
+    volume = TsdfVolume(camera.config.intrinsic_matrix(), 5.0, config, expected_blocks)
     for k, yaw in enumerate(np.arange(0.0, 2 * np.pi, 0.25)):
         pose = Pose(np.array([1.5 + 0.1 * k, 2.5, 1.25]), float(yaw))
         volume.integrate(camera.render(pose).depth, pose)
@@ -123,3 +123,38 @@ def test_surface_points_with_an_estimate_are_open3ds_counted_extraction() -> Non
     np.testing.assert_array_equal(rows(volume.surface_points()), expected)
     short = volume._grid.extract_point_cloud(volume.config.weight_threshold, len(expected) // 2)
     assert len(short.point.positions) == len(expected) // 2  # what the re-extraction catches
+
+
+def _box_surface(size: tuple[float, float, float], step: float) -> np.ndarray:
+    """(N, 3) points on the six faces of the box [0, size], `step` apart."""
+    axes = [np.arange(0.0, s + 1e-9, step) for s in size]
+    faces = []
+    for a in range(3):
+        b, c = [x for x in range(3) if x != a]
+        gb, gc = np.meshgrid(axes[b], axes[c], indexing="ij")
+        for value in (0.0, size[a]):
+            face = np.zeros((gb.size, 3))
+            face[:, a], face[:, b], face[:, c] = value, gb.ravel(), gc.ravel()
+            faces.append(face)
+    return np.concatenate(faces)
+
+
+def test_surface_block_count_sizes_the_table_for_a_flight_of_that_surface() -> None:
+    """The blocks within the truncation of a box's surface are about the blocks a flight
+    inside it fuses (at most a fifth more); the table starts with room for them."""
+    from sim.tsdf import EXPECTED_BLOCK_MARGIN, surface_block_count
+
+    config = TsdfConfig(initial_block_count=100)
+    expected = surface_block_count(_box_surface((6.0, 5.0, 2.5), 0.05), config)
+    flown = _box_flight(config)._grid.hashmap().size()
+    assert flown <= expected <= 1.2 * flown, (flown, expected)
+
+    made = TsdfVolume(np.eye(3), 5.0, config, expected_blocks=expected)
+    assert made._grid.hashmap().capacity() == np.ceil(expected * EXPECTED_BLOCK_MARGIN)
+    sized = _box_flight(config, expected_blocks=expected)
+    assert sized._grid.hashmap().size() == flown
+    # Corner cases: a point at a block's centre is in one block, on a face in two.
+    block = config.voxel_size_m * config.block_resolution
+    assert surface_block_count(np.array([[block / 2] * 3]), config) == 1
+    assert surface_block_count(np.array([[0.0, block / 2, block / 2]]), config) == 2
+    assert surface_block_count(np.zeros((0, 3)), config) == 0
