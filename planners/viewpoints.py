@@ -134,7 +134,7 @@ def _candidate_pairs(
     target is within the elevation and the range: (P,) the target of each (an index into
     `target_c`) and (P, 3) its eye voxel. Sets each eye voxel in `eyes`.
 
-    Pairs come in `frontier_viewpoints`' order: each of `extra_c` with every target, then every
+    Pairs come in `ViewpointCandidates.all`' order: each of `extra_c` with every target, then every
     target with every offset."""
     n_t, n_o, n_e = target_c.shape[0], offset_vox.shape[0], extra_c.shape[0]
     si, sj, sk = traversable.shape
@@ -304,27 +304,6 @@ class ViewpointCandidates:
         if self._into_unknown and len(rows):
             rows = rows[sees_into_unknown(self._view, eyes_c[rows], targets[rows])]
         return Viewpoints(self._voxels[rows], targets[rows], self._target_ids[self._pair_t[rows]])
-
-
-def frontier_viewpoints(
-    view: MapView,
-    clusters: list[FrontierCluster],
-    offsets_m: npt.NDArray[np.float64],
-    *,
-    samples_per_cluster: int,
-    max_elevation_rad: float,
-    max_range_m: float,
-    excluded: BoolGrid | None = None,
-    extra: IndexArray | None = None,
-    into_unknown: bool = False,
-) -> Viewpoints:
-    """Viewpoints for up to `samples_per_cluster` voxels of each cluster: every candidate of
-    `ViewpointCandidates` (same arguments) that passes the line-of-sight test."""
-    return ViewpointCandidates(
-        view, clusters, offsets_m, samples_per_cluster=samples_per_cluster,
-        max_elevation_rad=max_elevation_rad, max_range_m=max_range_m, excluded=excluded,
-        extra=extra, into_unknown=into_unknown,
-    ).all()
 
 
 def sees_into_unknown(view: MapView, eyes: npt.NDArray[np.float64],

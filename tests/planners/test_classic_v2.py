@@ -9,7 +9,7 @@ import pytest
 
 from planners.classic import Classic, ClassicConfig, ClassicPlanner, ClassicV2, ClassicV2Config
 from planners.search import DistanceField
-from planners.viewpoints import frontier_viewpoints, ring_offsets, sees_into_unknown
+from planners.viewpoints import ViewpointCandidates, ring_offsets, sees_into_unknown
 from planners.waypoints import escape_starts
 from sim.map_view import MapView
 from sim.occupancy import VoxelState
@@ -32,13 +32,13 @@ def _floor_view(make_stack: StackFactory) -> MapView:
 
 def _viewpoints(view: MapView, into_unknown: bool, min_size: int = 1):  # type: ignore[no-untyped-def]
     cfg = ClassicConfig()
-    return frontier_viewpoints(
+    return ViewpointCandidates(
         view, view.frontier_clusters(min_size),
         ring_offsets(cfg.view_distances_m, cfg.view_height_offsets_m, cfg.view_directions),
         samples_per_cluster=cfg.samples_per_cluster,
         max_elevation_rad=np.radians(cfg.max_view_elevation_deg), max_range_m=5.0,
         into_unknown=into_unknown,
-    )
+    ).all()
 
 
 def test_free_floor_voxels_over_the_slab_have_no_viewpoint_into_the_unknown(

@@ -1,4 +1,4 @@
-"""`frontier_viewpoints` and `sees_into_unknown` against brute-force references on random maps:
+"""`ViewpointCandidates` and `sees_into_unknown` against brute-force references on random maps:
 every (eye, frontier voxel) pair made as whole arrays and filtered in turn, every face neighbour
 tried in turn. They must agree exactly, order included: a planner's flights depend on the order
 of its candidates."""
@@ -15,7 +15,6 @@ from planners.viewpoints import (
     ViewpointCandidates,
     Viewpoints,
     _sampled,
-    frontier_viewpoints,
     lines_clear,
     ring_offsets,
     sees_into_unknown,
@@ -83,8 +82,9 @@ def test_viewpoints_match_the_brute_force_reference(make_stack: StackFactory, se
     offsets = ring_offsets(cfg.view_distances_m, cfg.view_height_offsets_m, cfg.view_directions)
     extra = (np.array([[18, 15, 8], [2, 3, 4]], dtype=np.int64) if seed % 2 else None)
     args = (cfg.samples_per_cluster, np.radians(cfg.max_view_elevation_deg), 3.0)
-    fast = frontier_viewpoints(view, clusters, offsets, samples_per_cluster=args[0],
-                               max_elevation_rad=args[1], max_range_m=args[2], extra=extra)
+    fast = ViewpointCandidates(view, clusters, offsets, samples_per_cluster=args[0],
+                               max_elevation_rad=args[1], max_range_m=args[2],
+                               extra=extra).all()
     slow = _reference(view, clusters, offsets, *args, extra)
     assert len(slow) > 200, len(slow)
     np.testing.assert_array_equal(fast.voxels, slow.voxels)
