@@ -50,11 +50,10 @@ def surface_block_count(points: npt.ArrayLike, config: TsdfConfig) -> int:
     block = config.voxel_size_m * config.block_resolution
     trunc = config.voxel_size_m * config.trunc_voxel_multiplier
     lo = np.floor((pts.min(axis=0) - trunc) / block).astype(np.int64)
-    span = np.floor((pts.max(axis=0) + trunc) / block).astype(np.int64) - lo + 1
-    keys = []
-    for corner in np.array(np.meshgrid(*[(-trunc, trunc)] * 3)).reshape(3, -1).T:
-        b = np.floor((pts + corner) / block).astype(np.int64) - lo
-        keys.append((b[:, 0] * span[1] + b[:, 1]) * span[2] + b[:, 2])
+    span = tuple(np.floor((pts.max(axis=0) + trunc) / block).astype(np.int64) - lo + 1)
+    keys = [np.ravel_multi_index(tuple((np.floor((pts + corner) / block).astype(np.int64) - lo).T),
+                                 span)
+            for corner in np.array(np.meshgrid(*[(-trunc, trunc)] * 3)).reshape(3, -1).T]
     return len(np.unique(np.concatenate(keys)))
 
 

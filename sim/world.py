@@ -91,12 +91,12 @@ class World:
         pybullet.setPhysicsEngineParameter(
             fixedTimeStep=self.dt, numSubSteps=1, physicsClientId=cid
         )
-        self._scene = [
+        # The scene's bodies, a set: contacts are told apart from other bodies by membership.
+        self._scene = frozenset(
             pybullet.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=shape,
                                      physicsClientId=cid)
             for shape in _scene_shapes(vertices, triangles, cid)
-        ]
-        self._parts = frozenset(self._scene)
+        )
         sphere = pybullet.createCollisionShape(
             pybullet.GEOM_SPHERE, radius=limits.radius_m, physicsClientId=cid
         )
@@ -140,7 +140,7 @@ class World:
         # One query for the sphere's contacts with every scene part (a large scene has many
         # parts); the deepest is the same whichever order they come in.
         touching = [c[8] for c in pybullet.getContactPoints(self._body, physicsClientId=cid)
-                    if c[8] <= 0.0 and (c[2] if c[1] == self._body else c[1]) in self._parts]
+                    if c[8] <= 0.0 and (c[2] if c[1] == self._body else c[1]) in self._scene]
         if not touching:
             return None
         return Contact(self.time, self.position.copy(), float(-min(touching)))
