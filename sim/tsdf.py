@@ -11,6 +11,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from sim.camera import BODY_FROM_OPTICAL
 from sim.geometry import FloatArray, Pose, yaw_matrix
 from sim.open3d_any import o3c, o3d
+from sim.tsdf_points import crossing_points
 from sim.tsdf_slabs import block_grid, mesh_in_slabs
 
 # Open3D doubles a full block table, and a table's blocks are resident whether used or not
@@ -22,9 +23,6 @@ BLOCK_GROWTH = 1.25
 # tables at once (the largest rise of a FACILITY C run's memory) and costs about a second.
 # The margin leaves room for a frame's blocks, which `_make_room` counts whole.
 EXPECTED_BLOCK_MARGIN = 1.1
-# Points expected per block in an extraction, over the last extraction's ratio (which stays
-# within a few percent from one snapshot to the next on the built-in areas).
-POINT_ESTIMATE_MARGIN = 1.25
 
 
 class TsdfConfig(BaseModel):
@@ -73,7 +71,6 @@ class TsdfVolume:
             max(config.initial_block_count, math.ceil(expected_blocks * EXPECTED_BLOCK_MARGIN)),
         )
         self.frames = 0
-        self._points_per_block = 0.0  # of the last extraction, for the next one's estimate
 
     @staticmethod
     def extrinsic(pose: Pose) -> FloatArray:
@@ -116,28 +113,11 @@ class TsdfVolume:
             table.reserve(max(needed, math.ceil(capacity * BLOCK_GROWTH)))
 
     def surface_points(self) -> npt.NDArray[np.float32]:
-        """(N, 3) points on the fused surface, as Open3D computes them (float32; empty before
-        the first frame)."""
+        """(N, 3) points on the fused surface, Open3D's `extract_point_cloud` points (float32;
+        `sim.tsdf_points`), blocks in key order; empty before the first frame."""
         if self.frames == 0:
             return np.zeros((0, 3), dtype=np.float32)
-        blocks = self._grid.hashmap().size()
-        try:
-            cloud = None
-            if self._points_per_block > 0.0:
-                # Told how many points to expect, Open3D skips the pass that counts them (a
-                # third of the extraction). Told too few it returns only that many, so a cloud
-                # that fills the estimate is extracted again, counted.
-                estimate = math.ceil(self._points_per_block * blocks * POINT_ESTIMATE_MARGIN)
-                cloud = self._grid.extract_point_cloud(self.config.weight_threshold, estimate)
-                if len(cloud.point.positions) >= estimate:
-                    cloud = None
-            if cloud is None:
-                cloud = self._grid.extract_point_cloud(self.config.weight_threshold)
-        except RuntimeError:  # Open3D raises instead of returning an empty cloud
-            return np.zeros((0, 3), dtype=np.float32)
-        points = np.asarray(cloud.point.positions.numpy(), dtype=np.float32)
-        self._points_per_block = len(points) / max(blocks, 1)
-        return points
+        return crossing_points(self._grid, self.config.voxel_size_m, self.config.weight_threshold)
 
     def mesh(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int32]]:
         """Marching-cubes mesh of the fused surface: (V, 3) vertices and (F, 3) triangles."""

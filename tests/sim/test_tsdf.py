@@ -103,11 +103,10 @@ def test_a_block_table_grown_many_times_holds_the_same_field() -> None:
                                   rows(np.sort(wv[wt].reshape(len(wt), 9), axis=1)))
 
 
-def test_surface_points_with_an_estimate_are_open3ds_counted_extraction() -> None:
-    """After the first extraction Open3D is told how many points to expect; the points are
-    those of its own counted extraction (in another order when it runs on several threads, as
-    any two of its extractions are), and an estimate that falls short (the surface grew more
-    than the margin) gives them too."""
+def test_surface_points_are_open3ds_extraction_in_block_key_order() -> None:
+    """`surface_points` gives the points of Open3D's own extraction, bit for bit (its threads
+    order them differently from one call to the next; ours go by block key, the same every
+    time), crossings between blocks included."""
     volume = _box_flight(TsdfConfig())
 
     def rows(points: np.ndarray) -> np.ndarray:
@@ -115,14 +114,22 @@ def test_surface_points_with_an_estimate_are_open3ds_counted_extraction() -> Non
 
     counted = volume._grid.extract_point_cloud(volume.config.weight_threshold)
     expected = rows(counted.point.positions.numpy())
-    first = volume.surface_points()  # counted: nothing to estimate from yet
-    assert volume._points_per_block > 0.0
-    np.testing.assert_array_equal(rows(first), expected)
-    np.testing.assert_array_equal(rows(volume.surface_points()), expected)  # estimated
-    volume._points_per_block /= 4.0  # as if the surface had grown fourfold since
-    np.testing.assert_array_equal(rows(volume.surface_points()), expected)
-    short = volume._grid.extract_point_cloud(volume.config.weight_threshold, len(expected) // 2)
-    assert len(short.point.positions) == len(expected) // 2  # what the re-extraction catches
+    points = volume.surface_points()
+    assert points.dtype == np.float32 and len(points) > 1000
+    np.testing.assert_array_equal(rows(points), expected)
+    np.testing.assert_array_equal(volume.surface_points(), points)
+    # Crossings between two blocks: past the last voxel sample of a block along an axis.
+    res = volume.config.block_resolution
+    voxels = points.astype(np.float64) / volume.config.voxel_size_m
+    within_block = voxels - np.floor(voxels / res) * res
+    assert np.count_nonzero(within_block > res - 1 + 1e-3) > 100
+
+
+def test_surface_points_of_an_empty_grid_and_a_high_threshold() -> None:
+    volume = TsdfVolume(np.eye(3), 5.0, TsdfConfig())
+    assert volume.surface_points().shape == (0, 3)
+    flown = _box_flight(TsdfConfig(weight_threshold=1e9))
+    assert flown.surface_points().shape == (0, 3)
 
 
 def _box_surface(size: tuple[float, float, float], step: float) -> np.ndarray:
