@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -22,9 +23,9 @@ from areas import load_area, load_ground_truth
 from benchmarks.common import print_table, write_json
 from planners.registry import make
 from sim import metrics
-from sim.camera import DepthCamera
 from sim.config import preset
 from sim.episode import run_episode
+from sim.mesh_distance import distance_to_mesh
 
 
 def main() -> None:
@@ -37,7 +38,7 @@ def main() -> None:
     truth = load_ground_truth(area)
     cfg = preset("exact")
     result = run_episode(area, truth, make(args.planner), cfg, 0, seconds=args.seconds)
-    camera = DepthCamera(area.vertices, area.triangles, cfg.camera)
+    to_mesh = partial(distance_to_mesh, area.vertices, area.triangles)
     cloud = truth.surface.sample(cfg.final_recall_points)
     rows, out = [], []
     tolerance = metrics.TIE_TOLERANCE_M
@@ -46,7 +47,7 @@ def main() -> None:
         for dtype in (np.float32, np.float64):
             verts = result.mesh_vertices.astype(dtype).astype(np.float64)
             for tau in (0.0499, 0.05, 0.0501):
-                s = metrics.surface_scores(verts, cloud, tau, camera.distance_to_surface_many)
+                s = metrics.surface_scores(verts, cloud, tau, to_mesh)
                 rows.append([f"{1000 * tol:.1f}", np.dtype(dtype).name, f"{100 * tau:.2f}",
                              f"{s.precision:.5f}", f"{s.recall:.5f}", f"{s.fscore:.5f}"])
                 out.append({"tolerance_m": tol, "dtype": np.dtype(dtype).name, "tau_m": tau,

@@ -12,6 +12,7 @@ import math
 import time
 from collections.abc import Generator
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -26,6 +27,7 @@ from sim.heap import release_free_heap
 from sim.interface import Observation, Plan, PlannerContext, PlannerLike, PlanOutcome
 from sim.measures import EpisodeCounters, EpisodeEnd, EpisodeView, Measure, make_measures
 from sim.measures.base import ProgressCallback
+from sim.mesh_distance import distance_to_mesh
 from sim.plan_check import PlanChecker, Start
 from sim.planning_charge import PlanningCharge
 from sim.result import EpisodeResult, RunStatus
@@ -116,7 +118,8 @@ class EpisodeLoop:
         self.counters = EpisodeCounters()
         self.view = EpisodeView(area, ground_truth, config, seed, self.sensing.mapping,
                                 self.sensing.tsdf, self.counters,
-                                self.sensing.camera.distance_to_surface_many, progress)
+                                partial(distance_to_mesh, area.vertices, area.triangles),
+                                progress)
         self.measures: list[Measure] = make_measures()
         self.planned_from = area.start.position.copy()
         self.frame_period = 1.0 / config.camera.rate_hz

@@ -65,7 +65,8 @@ class Reconstruction(Measure):
 
 class SurfaceQuality(Measure):
     """Precision, recall, F-score at tau and RMSE of the reconstructed mesh's vertices against
-    the truth (`sim.metrics.surface_scores`, distances to truth exact to the mesh)."""
+    the truth (`sim.metrics.surface_scores`; each vertex's exact distance to the area's mesh,
+    `sim.mesh_distance`)."""
 
     name = "surface"
     requires = ("reconstruction",)
