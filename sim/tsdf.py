@@ -12,6 +12,7 @@ from sim.camera import BODY_FROM_OPTICAL
 from sim.geometry import FloatArray, Pose, yaw_matrix
 from sim.open3d_any import o3c, o3d
 from sim.tsdf_points import crossing_points
+from sim.tsdf_sampling import trilinear
 from sim.tsdf_slabs import block_grid, mesh_in_slabs
 
 # Open3D doubles a full block table, and a table's blocks are resident whether used or not
@@ -138,46 +139,8 @@ class TsdfVolume:
         Returns:
             sdf: (N,) metres, NaN where a sample is not allocated; weight: (N,) 0 there.
         """
-        n = len(points)
-        sdf = np.zeros(n)
-        weight = np.full(n, np.inf, dtype=np.float32)
-        if self.frames == 0 or n == 0:
-            return np.full(n, np.nan), np.zeros(n, dtype=np.float32)
         cfg = self.config
-        # Voxel (i, j, k) holds the field sampled at (i, j, k) * voxel_size.
-        scaled = np.asarray(points, dtype=np.float64) / cfg.voxel_size_m
-        base = np.floor(scaled).astype(np.int64)
-        frac = scaled - base
-        tsdf_all = self._grid.attribute("tsdf").reshape((-1,))
-        weight_all = self._grid.attribute("weight").reshape((-1,))
-        for corner in np.ndindex(2, 2, 2):
-            off = np.array(corner)
-            value, w = self._samples(base + off, tsdf_all, weight_all)
-            tri = np.prod(np.where(off == 1, frac, 1.0 - frac), axis=1)
-            sdf += tri * value
-            weight = np.minimum(weight, w)
-        unseen = ~(weight > 0)
-        sdf[unseen] = np.nan
-        weight[unseen] = 0.0
+        if self.frames == 0:
+            return np.full(len(points), np.nan), np.zeros(len(points), dtype=np.float32)
+        sdf, weight = trilinear(self._grid, points, cfg.voxel_size_m)
         return sdf * cfg.voxel_size_m * cfg.trunc_voxel_multiplier, weight
-
-    def _samples(
-        self, vox: npt.NDArray[np.int64], tsdf_all: o3c.Tensor, weight_all: o3c.Tensor
-    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float32]]:
-        """Normalised TSDF and weight of voxels (N, 3); 0 and 0 where unallocated."""
-        res = self.config.block_resolution
-        block = np.floor_divide(vox, res)
-        local = vox - block * res
-        buf, found = self._grid.hashmap().find(o3c.Tensor(block.astype(np.int32)))
-        hit = np.flatnonzero(found.numpy().astype(bool))
-        value = np.zeros(len(vox))
-        w = np.zeros(len(vox), dtype=np.float32)
-        if len(hit):
-            # Within a block, voxels are laid out x fastest, then y, then z.
-            flat = buf.numpy().astype(np.int64)[hit] * res**3 + (
-                (local[hit, 2] * res + local[hit, 1]) * res + local[hit, 0]
-            )
-            index = o3c.Tensor(flat)
-            value[hit] = tsdf_all[index].numpy()
-            w[hit] = weight_all[index].numpy()
-        return value, w

@@ -11,6 +11,8 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
+from sim.tsdf_blocks import block_arrays, slot_of
+
 
 def crossing_points(grid: Any, voxel_size: float,
                     weight_threshold: float) -> npt.NDArray[np.float32]:
@@ -21,55 +23,33 @@ def crossing_points(grid: Any, voxel_size: float,
         grid: an Open3D CPU `VoxelBlockGrid` with float32 "tsdf" and "weight" attributes.
         voxel_size: its voxel edge, metres.
     """
-    table = grid.hashmap()
-    slots = table.active_buf_indices().numpy().astype(np.int64)
-    if len(slots) == 0:
+    blocks = block_arrays(grid)
+    if blocks is None:
         return np.zeros((0, 3), dtype=np.float32)
-    keys = table.key_tensor().numpy()
-    # Views of the grid's own buffers, (capacity, R, R, R, 1) with x fastest: no copy.
-    tsdf = grid.attribute("tsdf").numpy()
-    weight = grid.attribute("weight").numpy()
-    res = tsdf.shape[1]
-    shape = (tsdf.shape[0], res, res, res)
-    tsdf, weight = tsdf.reshape(shape), weight.reshape(shape)
-    order, after = _blocks_in_key_order(np.ascontiguousarray(keys[slots]), slots)
-    limit = np.float32(weight_threshold)
-    voxel = np.float32(voxel_size)
-    empty = np.zeros((0, 3), dtype=np.float32)
-    count = _crossings(keys, order, after, tsdf, weight, limit, voxel, empty)
+    after = _next_blocks(blocks.keys, blocks.order, blocks.sorted_keys, blocks.origin,
+                         blocks.span)
+    args = (blocks.keys, blocks.order, after, blocks.tsdf, blocks.weight,
+            np.float32(weight_threshold), np.float32(voxel_size))
+    count = _crossings(*args, np.zeros((0, 3), dtype=np.float32))
     points = np.empty((count, 3), dtype=np.float32)
-    _crossings(keys, order, after, tsdf, weight, limit, voxel, points)
+    _crossings(*args, points)
     return points
 
 
 @numba.njit(cache=True)
-def _blocks_in_key_order(
-    keys: npt.NDArray[np.int32], slots: npt.NDArray[np.int64]
-) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:  # pragma: no cover - numba
-    """The slots of blocks `keys` (B, 3) sorted by key, and for each the slot of the block after
-    it along x, y and z (-1: none), (B, 3)."""
-    count = keys.shape[0]
-    lo = np.empty(3, np.int64)
-    span = np.empty(3, np.int64)
-    for a in range(3):
-        lo[a] = keys[:, a].min() - 1
-        span[a] = keys[:, a].max() + 2 - lo[a]
-    flat = np.empty(count, np.int64)
-    for b in range(count):
-        flat[b] = ((keys[b, 0] - lo[0]) * span[1] + (keys[b, 1] - lo[1])) * span[2] \
-            + (keys[b, 2] - lo[2])
-    rank = np.argsort(flat)
-    sorted_flat = flat[rank]
-    steps = np.array([span[1] * span[2], span[2], 1])
-    order = slots[rank]
-    after = np.full((count, 3), -1, np.int64)
-    for p in range(count):
-        for a in range(3):
-            wanted = sorted_flat[p] + steps[a]
-            i = np.searchsorted(sorted_flat, wanted)
-            if i < count and sorted_flat[i] == wanted:
-                after[p, a] = order[i]
-    return order, after
+def _next_blocks(keys: npt.NDArray[np.int32], order: npt.NDArray[np.int64],
+                 sorted_keys: npt.NDArray[np.int64], origin: npt.NDArray[np.int64],
+                 span: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:  # pragma: no cover
+    """For each block in `order`, the slot of the block after it along x, y and z (-1: none),
+    (B, 3)."""
+    after = np.full((order.shape[0], 3), -1, np.int64)
+    for p in range(order.shape[0]):
+        slot = order[p]
+        bx, by, bz = keys[slot, 0], keys[slot, 1], keys[slot, 2]
+        after[p, 0] = slot_of(sorted_keys, order, origin, span, bx + 1, by, bz)
+        after[p, 1] = slot_of(sorted_keys, order, origin, span, bx, by + 1, bz)
+        after[p, 2] = slot_of(sorted_keys, order, origin, span, bx, by, bz + 1)
+    return after
 
 
 @numba.njit(cache=True)
