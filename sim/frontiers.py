@@ -304,11 +304,13 @@ class FrontierTracker:
         normal[nonzero] = mean_dir[nonzero] / norm[nonzero, None]
 
         order = np.argsort(labels, kind="stable")  # stable: C order inside each piece
-        members = np.split(indices[order], np.cumsum(sizes)[:-1])
+        grouped = indices[order]
+        grouped.setflags(write=False)
+        ends = np.cumsum(sizes)
         result: list[FrontierCluster] = []
+        # Only the kept pieces are cut out (most pieces are smaller than `min_size`).
         for label in np.flatnonzero(sizes >= min_size):
-            piece = members[label]
-            piece.setflags(write=False)
+            piece = grouped[ends[label] - sizes[label]:ends[label]]
             result.append(
                 FrontierCluster(
                     id=len(result),
