@@ -14,12 +14,11 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
+from sim.cell_lists import cell_edge, cell_lists
+
 # Reach of the first pass, metres: the reconstructed surface lies within a few TSDF voxels of
 # the true one, so nearly every point is settled by it; the rest go again with twice the reach.
 FIRST_REACH_M = 0.15
-# The pass's cell table is one int64 per cell of the reach's size over the mesh's bounds:
-# larger areas get a larger first reach rather than a larger table.
-MAX_CELLS = 8_000_000
 
 
 def distance_to_mesh(vertices: npt.ArrayLike, triangles: npt.ArrayLike,
@@ -33,20 +32,12 @@ def distance_to_mesh(vertices: npt.ArrayLike, triangles: npt.ArrayLike,
     if len(tris) == 0 or len(query) == 0:
         return best
     low, high = verts[tris.reshape(-1)].min(axis=0), verts[tris.reshape(-1)].max(axis=0)
-    volume = float(np.prod(high - low + 4 * FIRST_REACH_M))
-    reach = max(FIRST_REACH_M, (volume / MAX_CELLS) ** (1 / 3))
+    reach = cell_edge(low, high, FIRST_REACH_M, 2)
     pending = np.arange(len(query))
     while len(pending):
-        origin = low - 2 * reach
-        shape = np.floor((high + 2 * reach - origin) / reach).astype(np.int64) + 1
-        cells = np.floor((query[pending] - origin) / reach).astype(np.int64)
-        inside = np.all((cells >= 0) & (cells < shape), axis=1)
-        flat = np.where(inside, np.ravel_multi_index(cells.T, shape, mode="clip"), -1)
-        order = np.argsort(flat, kind="stable")
-        order = order[flat[order] >= 0]
-        start = np.zeros(int(np.prod(shape)) + 1, dtype=np.int64)
-        np.cumsum(np.bincount(flat[order], minlength=len(start) - 1), out=start[1:])
-        _nearer_within(verts, tris, origin, reach, shape, start, pending[order], query, best)
+        lists = cell_lists(query, pending, low, high, reach, 2)
+        _nearer_within(verts, tris, lists.origin, reach, lists.shape, lists.start,
+                       lists.members, query, best)
         # A point whose least distance found is within the reach has its exact distance: every
         # triangle that close was tried. Once the reach spans the mesh and the points, all have.
         span = np.maximum(high, query[pending].max(axis=0)) - np.minimum(

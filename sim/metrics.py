@@ -9,6 +9,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
+from sim.cell_lists import share_within
+
 Points = npt.NDArray[np.floating]
 
 # Distances are compared with tau plus this tolerance. The TSDF's voxel equals tau (5 cm), so
@@ -68,8 +70,7 @@ def surface_recall(reconstruction: Points, truth: Points, tau_m: float) -> float
         return 0.0
     # The bound is exclusive; nudge it so that a distance of exactly the bound counts.
     bound = float(np.nextafter(tau_m + TIE_TOLERANCE_M, np.inf))
-    dist, _ = cKDTree(reconstruction).query(truth, k=1, distance_upper_bound=bound)
-    return float(np.count_nonzero(np.isfinite(dist))) / len(truth)
+    return share_within(reconstruction, truth, bound)
 
 
 def sdf_surface_recall(

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numba
 import numpy as np
 import numpy.typing as npt
 
@@ -52,30 +53,66 @@ def _write_flat(archive: zipfile.ZipFile, name: str, items: list[np.ndarray],
             fh.write(np.ascontiguousarray(item, dtype=dtype).tobytes())
 
 
+# Past this many cells over the snapshot's bounds (a bit each), thinning sorts cell keys instead.
+MAX_BITMAP_CELLS = 1 << 29
+
+
 def thinned(points: np.ndarray, voxel_m: float, chunk: int = 1 << 20) -> np.ndarray:
     """The first of `points` (N, 3) in each cell of a `voxel_m` grid, in their order.
 
-    A cell is `floor(point / voxel_m)` in float64. The cells are computed `chunk` points at a
-    time, so that a snapshot of millions of points needs one int64 key per point beside them,
-    not float64 and int64 copies of the whole cloud."""
+    A cell is `floor(point / voxel_m)` in float64. One compiled pass marks each cell in a
+    bitmap over the cells' bounds as its first point is met; past `MAX_BITMAP_CELLS` cells the
+    cell keys are computed `chunk` points at a time and sorted, so that a snapshot of millions
+    of points needs one int64 key per point beside them, not float64 and int64 copies."""
     n = len(points)
     if n == 0:
         return points
-
-    def cells(start: int) -> npt.NDArray[np.int64]:
-        part = np.asarray(points[start:start + chunk], dtype=np.float64)
-        return np.floor(part / voxel_m).astype(np.int64)
-
-    starts = range(0, n, chunk)
-    bounds = [(c.min(axis=0), c.max(axis=0)) for c in map(cells, starts)]
-    lo = np.min([b[0] for b in bounds], axis=0)
-    span = np.max([b[1] for b in bounds], axis=0) - lo + 1
+    cloud = np.ascontiguousarray(points)
+    lo, hi = _cell_bounds(cloud, float(voxel_m))
+    span = hi - lo + 1
+    if int(np.prod(span)) <= MAX_BITMAP_CELLS:
+        seen = np.zeros((int(np.prod(span)) + 7) // 8, dtype=np.uint8)
+        return points[_first_in_cells(cloud, float(voxel_m), lo, span, seen)]
     keys = np.empty(n, dtype=np.int64)
-    for s in starts:
-        c = cells(s) - lo
+    for s in range(0, n, chunk):
+        c = np.floor(np.asarray(points[s:s + chunk], dtype=np.float64) / voxel_m).astype(
+            np.int64) - lo
         keys[s:s + len(c)] = (c[:, 0] * span[1] + c[:, 1]) * span[2] + c[:, 2]
     _, first = np.unique(keys, return_index=True)
     return points[np.sort(first)]
+
+
+@numba.njit(cache=True)
+def _cell_bounds(points: npt.NDArray[Any], voxel: float) -> tuple[
+    npt.NDArray[np.int64], npt.NDArray[np.int64]
+]:  # pragma: no cover - numba
+    """The least and greatest cell (3,) of `points` (N, 3)."""
+    lo = np.full(3, np.iinfo(np.int64).max, np.int64)
+    hi = np.full(3, np.iinfo(np.int64).min, np.int64)
+    for i in range(points.shape[0]):
+        for a in range(3):
+            c = np.int64(np.floor(np.float64(points[i, a]) / voxel))
+            lo[a] = min(lo[a], c)
+            hi[a] = max(hi[a], c)
+    return lo, hi
+
+
+@numba.njit(cache=True)
+def _first_in_cells(points: npt.NDArray[Any], voxel: float, lo: npt.NDArray[np.int64],
+                    span: npt.NDArray[np.int64],
+                    seen: npt.NDArray[np.uint8]) -> npt.NDArray[np.bool_]:  # pragma: no cover
+    """True on each point whose cell no earlier point is in."""
+    keep = np.zeros(points.shape[0], np.bool_)
+    for i in range(points.shape[0]):
+        cx = np.int64(np.floor(np.float64(points[i, 0]) / voxel)) - lo[0]
+        cy = np.int64(np.floor(np.float64(points[i, 1]) / voxel)) - lo[1]
+        cz = np.int64(np.floor(np.float64(points[i, 2]) / voxel)) - lo[2]
+        key = (cx * span[1] + cy) * span[2] + cz
+        byte, bit = key >> 3, np.uint8(1 << (key & 7))
+        if not seen[byte] & bit:
+            seen[byte] |= bit
+            keep[i] = True
+    return keep
 
 
 @dataclass

@@ -237,8 +237,17 @@ def _thinned_whole(points: np.ndarray, voxel_m: float) -> np.ndarray:
     return pts[np.sort(first)].astype(np.float32)
 
 
-@pytest.mark.parametrize("chunk", [1, 7, 1000, 1 << 20])
-def test_snapshots_thinned_in_chunks_are_thinned_as_a_whole(chunk: int) -> None:
+@pytest.mark.parametrize(("chunk", "bitmap"), [(1, False), (7, False), (1000, False),
+                                               (1 << 20, False), (1 << 20, True)])
+def test_snapshots_thinned_in_chunks_are_thinned_as_a_whole(
+    chunk: int, bitmap: bool, monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """By the bitmap of cells met, or (bounds too large for one) by sorted keys computed a
+    chunk at a time: the thinning of the whole cloud at once either way."""
+    import sim.recording
+
+    if not bitmap:
+        monkeypatch.setattr(sim.recording, "MAX_BITMAP_CELLS", 0)
     rng = np.random.default_rng(5)
     # float32 points, as the TSDF gives them, many on cell faces and many sharing a cell.
     points = np.concatenate([

@@ -1,0 +1,105 @@
+"""Points listed by the cell of a uniform grid that holds them, for searches within a reach:
+the points of a cell are `members[start[c]:start[c + 1]]`, cells numbered in C order."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+import numpy.typing as npt
+
+# The table is one int64 per cell over the points' bounds: a larger cell rather than a larger
+# table past this many cells.
+MAX_CELLS = 8_000_000
+
+
+@dataclass(frozen=True)
+class CellLists:
+    """Attributes:
+    origin: (3,) metres, the corner of cell (0, 0, 0); cell: edge, metres; shape: (3,) cells.
+    start: (C + 1,) int64 offsets into `members`; members: (M,) int64 indices of the points.
+    """
+
+    origin: npt.NDArray[np.float64]
+    cell: float
+    shape: npt.NDArray[np.int64]
+    start: npt.NDArray[np.int64]
+    members: npt.NDArray[np.int64]
+
+
+def cell_edge(low: npt.NDArray[np.float64], high: npt.NDArray[np.float64], wanted: float,
+              margin_cells: int) -> float:
+    """`wanted`, or larger so that the box low..high plus `margin_cells` cells on every side
+    holds at most `MAX_CELLS` cells."""
+    volume = float(np.prod(high - low + 2 * margin_cells * wanted))
+    return max(wanted, (volume / MAX_CELLS) ** (1 / 3))
+
+
+def cell_lists(points: npt.NDArray[np.float64], which: npt.NDArray[np.int64],
+               low: npt.NDArray[np.float64], high: npt.NDArray[np.float64], cell: float,
+               margin_cells: int) -> CellLists:
+    """Lists `points[which]` by cell of edge `cell` over low..high grown by `margin_cells`
+    cells (points outside are left out), in the order of `which` within each cell."""
+    origin = low - margin_cells * cell
+    shape = np.floor((high + margin_cells * cell - origin) / cell).astype(np.int64) + 1
+    cells = np.floor((points[which] - origin) / cell).astype(np.int64)
+    inside = np.all((cells >= 0) & (cells < shape), axis=1)
+    flat = np.where(inside, np.ravel_multi_index(cells.T, shape, mode="clip"), -1)
+    order = np.argsort(flat, kind="stable")
+    order = order[flat[order] >= 0]
+    start = np.zeros(int(np.prod(shape)) + 1, dtype=np.int64)
+    np.cumsum(np.bincount(flat[order], minlength=len(start) - 1), out=start[1:])
+    return CellLists(origin, cell, shape, start, which[order])
+
+
+def share_within(points: npt.ArrayLike, queries: npt.ArrayLike, bound: float) -> float:
+    """Share of `queries` (N, 3) with one of `points` (M, 3) at a distance below `bound`
+    (squared distances compared, summed x, y, z)."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    qs = np.ascontiguousarray(queries, dtype=np.float64).reshape(-1, 3)
+    if len(qs) == 0 or len(pts) == 0:
+        return 0.0
+    low, high = pts.min(axis=0), pts.max(axis=0)
+    cell = cell_edge(low, high, bound, 1)
+    lists = cell_lists(pts, np.arange(len(pts)), low, high, cell, 1)
+    found = _count_within(pts, qs, bound * bound, lists.origin, lists.cell, lists.shape,
+                          lists.start, lists.members)
+    return found / len(qs)
+
+
+@numba.njit(cache=True)
+def _count_within(points: npt.NDArray[np.float64], queries: npt.NDArray[np.float64],
+                  bound2: float, origin: npt.NDArray[np.float64], cell: float,
+                  shape: npt.NDArray[np.int64], start: npt.NDArray[np.int64],
+                  members: npt.NDArray[np.int64]) -> int:  # pragma: no cover - numba
+    """Queries with a point at squared distance below `bound2` (cells at least the bound:
+    the cells around a query's own one hold every such point)."""
+    found = 0
+    for q in range(queries.shape[0]):
+        qx, qy, qz = queries[q, 0], queries[q, 1], queries[q, 2]
+        cx = int(np.floor((qx - origin[0]) / cell))
+        cy = int(np.floor((qy - origin[1]) / cell))
+        cz = int(np.floor((qz - origin[2]) / cell))
+        hit = False
+        for i in range(max(cx - 1, 0), min(cx + 1, shape[0] - 1) + 1):
+            for j in range(max(cy - 1, 0), min(cy + 1, shape[1] - 1) + 1):
+                row = (i * shape[1] + j) * shape[2]
+                for k in range(max(cz - 1, 0), min(cz + 1, shape[2] - 1) + 1):
+                    for s in range(start[row + k], start[row + k + 1]):
+                        p = members[s]
+                        dx = qx - points[p, 0]
+                        dy = qy - points[p, 1]
+                        dz = qz - points[p, 2]
+                        if dx * dx + dy * dy + dz * dz < bound2:
+                            hit = True
+                            break
+                    if hit:
+                        break
+                if hit:
+                    break
+            if hit:
+                break
+        if hit:
+            found += 1
+    return found
