@@ -11,7 +11,7 @@ import numpy.typing as npt
 
 # The table is one int64 per cell over the points' bounds: a larger cell rather than a larger
 # table past this many cells.
-MAX_CELLS = 8_000_000
+MAX_CELLS = 4_000_000
 
 
 @dataclass(frozen=True)
@@ -40,17 +40,46 @@ def cell_lists(points: npt.NDArray[np.float64], which: npt.NDArray[np.int64],
                low: npt.NDArray[np.float64], high: npt.NDArray[np.float64], cell: float,
                margin_cells: int) -> CellLists:
     """Lists `points[which]` by cell of edge `cell` over low..high grown by `margin_cells`
-    cells (points outside are left out), in the order of `which` within each cell."""
+    cells (points outside are left out), in the order of `which` within each cell. Beside the
+    lists it holds one int64 per point and an argsort's scratch for a moment."""
     origin = low - margin_cells * cell
     shape = np.floor((high + margin_cells * cell - origin) / cell).astype(np.int64) + 1
-    cells = np.floor((points[which] - origin) / cell).astype(np.int64)
-    inside = np.all((cells >= 0) & (cells < shape), axis=1)
-    flat = np.where(inside, np.ravel_multi_index(cells.T, shape, mode="clip"), -1)
+    flat = _flat_cells(points, which, origin, cell, shape)
     order = np.argsort(flat, kind="stable")
-    order = order[flat[order] >= 0]
-    start = np.zeros(int(np.prod(shape)) + 1, dtype=np.int64)
-    np.cumsum(np.bincount(flat[order], minlength=len(start) - 1), out=start[1:])
-    return CellLists(origin, cell, shape, start, which[order])
+    start = _starts(flat, int(np.prod(shape)))
+    outside = len(flat) - int(start[-1])  # keyed -1: sorted first
+    del flat
+    return CellLists(origin, cell, shape, start, which[order[outside:]])
+
+
+@numba.njit(cache=True)
+def _flat_cells(points: npt.NDArray[np.float64], which: npt.NDArray[np.int64],
+                origin: npt.NDArray[np.float64], cell: float,
+                shape: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:  # pragma: no cover
+    """(len(which),) C-order number of each point's cell, -1 outside the grid."""
+    flat = np.empty(which.shape[0], np.int64)
+    for n in range(which.shape[0]):
+        p = which[n]
+        i = int(np.floor((points[p, 0] - origin[0]) / cell))
+        j = int(np.floor((points[p, 1] - origin[1]) / cell))
+        k = int(np.floor((points[p, 2] - origin[2]) / cell))
+        if 0 <= i < shape[0] and 0 <= j < shape[1] and 0 <= k < shape[2]:
+            flat[n] = (i * shape[1] + j) * shape[2] + k
+        else:
+            flat[n] = -1
+    return flat
+
+
+@numba.njit(cache=True)
+def _starts(flat: npt.NDArray[np.int64], cells: int) -> npt.NDArray[np.int64]:  # pragma: no cover
+    """(cells + 1,) offsets of each cell's run in `flat` sorted (the -1s before them)."""
+    start = np.zeros(cells + 1, np.int64)
+    for f in flat:
+        if f >= 0:
+            start[f + 1] += 1
+    for c in range(cells):
+        start[c + 1] += start[c]
+    return start
 
 
 def share_within(points: npt.ArrayLike, queries: npt.ArrayLike, bound: float) -> float:

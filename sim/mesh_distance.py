@@ -31,7 +31,7 @@ def distance_to_mesh(vertices: npt.ArrayLike, triangles: npt.ArrayLike,
     best = np.full(len(query), np.inf)
     if len(tris) == 0 or len(query) == 0:
         return best
-    low, high = verts[tris.reshape(-1)].min(axis=0), verts[tris.reshape(-1)].max(axis=0)
+    low, high = verts.min(axis=0), verts.max(axis=0)
     reach = cell_edge(low, high, FIRST_REACH_M, 2)
     pending = np.arange(len(query))
     while len(pending):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -72,6 +73,11 @@ class TsdfVolume:
             max(config.initial_block_count, math.ceil(expected_blocks * EXPECTED_BLOCK_MARGIN)),
         )
         self.frames = 0
+
+    @property
+    def grid(self) -> Any:
+        """The Open3D `VoxelBlockGrid` itself, for reading (fusing goes through `integrate`)."""
+        return self._grid
 
     @staticmethod
     def extrinsic(pose: Pose) -> FloatArray:

@@ -1,7 +1,8 @@
 """The fused surface as points: where the signed distance changes sign between two neighbouring
 voxel samples, interpolated linearly along that axis. The points of Open3D's
-`VoxelBlockGrid.extract_point_cloud`, computed in one compiled pass (a sixth of its time on
-one thread), in an order fixed by the blocks' keys rather than by Open3D's threads."""
+`VoxelBlockGrid.extract_point_cloud`, computed in one compiled pass without its normals and
+colours (`benchmarks/bookkeeping_ops.py` times the two), in an order fixed by the blocks' keys
+rather than by Open3D's threads."""
 
 from __future__ import annotations
 
