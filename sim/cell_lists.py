@@ -40,16 +40,13 @@ def cell_lists(points: npt.NDArray[np.float64], which: npt.NDArray[np.int64],
                low: npt.NDArray[np.float64], high: npt.NDArray[np.float64], cell: float,
                margin_cells: int) -> CellLists:
     """Lists `points[which]` by cell of edge `cell` over low..high grown by `margin_cells`
-    cells (points outside are left out), in the order of `which` within each cell. Beside the
-    lists it holds one int64 per point and an argsort's scratch for a moment."""
+    cells (points outside are left out), in the order of `which` within each cell (a counting
+    sort: beside the lists, one int64 per point and per cell for a moment)."""
     origin = low - margin_cells * cell
     shape = np.floor((high + margin_cells * cell - origin) / cell).astype(np.int64) + 1
     flat = _flat_cells(points, which, origin, cell, shape)
-    order = np.argsort(flat, kind="stable")
     start = _starts(flat, int(np.prod(shape)))
-    outside = len(flat) - int(start[-1])  # keyed -1: sorted first
-    del flat
-    return CellLists(origin, cell, shape, start, which[order[outside:]])
+    return CellLists(origin, cell, shape, start, _members(flat, which, start))
 
 
 @numba.njit(cache=True)
@@ -71,8 +68,22 @@ def _flat_cells(points: npt.NDArray[np.float64], which: npt.NDArray[np.int64],
 
 
 @numba.njit(cache=True)
+def _members(flat: npt.NDArray[np.int64], which: npt.NDArray[np.int64],
+             start: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:  # pragma: no cover
+    """`which` grouped by cell, in their order within each cell."""
+    members = np.empty(start[-1], np.int64)
+    fill = start[:-1].copy()
+    for n in range(flat.shape[0]):
+        f = flat[n]
+        if f >= 0:
+            members[fill[f]] = which[n]
+            fill[f] += 1
+    return members
+
+
+@numba.njit(cache=True)
 def _starts(flat: npt.NDArray[np.int64], cells: int) -> npt.NDArray[np.int64]:  # pragma: no cover
-    """(cells + 1,) offsets of each cell's run in `flat` sorted (the -1s before them)."""
+    """(cells + 1,) offsets of each cell's points among the points inside the grid."""
     start = np.zeros(cells + 1, np.int64)
     for f in flat:
         if f >= 0:
@@ -84,51 +95,44 @@ def _starts(flat: npt.NDArray[np.int64], cells: int) -> npt.NDArray[np.int64]:  
 
 def share_within(points: npt.ArrayLike, queries: npt.ArrayLike, bound: float) -> float:
     """Share of `queries` (N, 3) with one of `points` (M, 3) at a distance below `bound`
-    (squared distances compared, summed x, y, z)."""
+    (squared distances compared, summed x, y, z). The queries are listed by cell and each point
+    marks those near it, so the lists hold the (usually fewer) queries, not the points."""
     pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     qs = np.ascontiguousarray(queries, dtype=np.float64).reshape(-1, 3)
     if len(qs) == 0 or len(pts) == 0:
         return 0.0
-    low, high = pts.min(axis=0), pts.max(axis=0)
+    low, high = qs.min(axis=0), qs.max(axis=0)
     cell = cell_edge(low, high, bound, 1)
-    lists = cell_lists(pts, np.arange(len(pts)), low, high, cell, 1)
-    found = _count_within(pts, qs, bound * bound, lists.origin, lists.cell, lists.shape,
-                          lists.start, lists.members)
-    return found / len(qs)
+    lists = cell_lists(qs, np.arange(len(qs)), low, high, cell, 1)
+    near = np.zeros(len(qs), dtype=np.bool_)
+    _mark_within(pts, qs, bound * bound, lists.origin, lists.cell, lists.shape, lists.start,
+                 lists.members, near)
+    return float(np.count_nonzero(near)) / len(qs)
 
 
 @numba.njit(cache=True)
-def _count_within(points: npt.NDArray[np.float64], queries: npt.NDArray[np.float64],
-                  bound2: float, origin: npt.NDArray[np.float64], cell: float,
-                  shape: npt.NDArray[np.int64], start: npt.NDArray[np.int64],
-                  members: npt.NDArray[np.int64]) -> int:  # pragma: no cover - numba
-    """Queries with a point at squared distance below `bound2` (cells at least the bound:
-    the cells around a query's own one hold every such point)."""
-    found = 0
-    for q in range(queries.shape[0]):
-        qx, qy, qz = queries[q, 0], queries[q, 1], queries[q, 2]
-        cx = int(np.floor((qx - origin[0]) / cell))
-        cy = int(np.floor((qy - origin[1]) / cell))
-        cz = int(np.floor((qz - origin[2]) / cell))
-        hit = False
+def _mark_within(points: npt.NDArray[np.float64], queries: npt.NDArray[np.float64],
+                 bound2: float, origin: npt.NDArray[np.float64], cell: float,
+                 shape: npt.NDArray[np.int64], start: npt.NDArray[np.int64],
+                 members: npt.NDArray[np.int64],
+                 near: npt.NDArray[np.bool_]) -> None:  # pragma: no cover - numba
+    """Sets `near` on the queries at squared distance below `bound2` from a point (cells at
+    least the bound: the cells around a point's own one hold every such query)."""
+    for p in range(points.shape[0]):
+        px, py, pz = points[p, 0], points[p, 1], points[p, 2]
+        cx = int(np.floor((px - origin[0]) / cell))
+        cy = int(np.floor((py - origin[1]) / cell))
+        cz = int(np.floor((pz - origin[2]) / cell))
         for i in range(max(cx - 1, 0), min(cx + 1, shape[0] - 1) + 1):
             for j in range(max(cy - 1, 0), min(cy + 1, shape[1] - 1) + 1):
                 row = (i * shape[1] + j) * shape[2]
                 for k in range(max(cz - 1, 0), min(cz + 1, shape[2] - 1) + 1):
                     for s in range(start[row + k], start[row + k + 1]):
-                        p = members[s]
-                        dx = qx - points[p, 0]
-                        dy = qy - points[p, 1]
-                        dz = qz - points[p, 2]
+                        q = members[s]
+                        if near[q]:
+                            continue
+                        dx = queries[q, 0] - px
+                        dy = queries[q, 1] - py
+                        dz = queries[q, 2] - pz
                         if dx * dx + dy * dy + dz * dz < bound2:
-                            hit = True
-                            break
-                    if hit:
-                        break
-                if hit:
-                    break
-            if hit:
-                break
-        if hit:
-            found += 1
-    return found
+                            near[q] = True

@@ -46,7 +46,7 @@ def distance_to_mesh(vertices: npt.ArrayLike, triangles: npt.ArrayLike,
             break
         pending = pending[best[pending] > reach * reach]
         reach *= 2.0
-    return np.sqrt(best)
+    return np.sqrt(best, out=best)
 
 
 @numba.njit(cache=True)
