@@ -18,14 +18,15 @@ MAX_CELLS = 4_000_000
 class CellLists:
     """Attributes:
     origin: (3,) metres, the corner of cell (0, 0, 0); cell: edge, metres; shape: (3,) cells.
-    start: (C + 1,) int64 offsets into `members`; members: (M,) int64 indices of the points.
+    start: (C + 1,) int64 offsets into `members`; members: (M,) indices of the points (the
+        dtype of those listed).
     """
 
     origin: npt.NDArray[np.float64]
     cell: float
     shape: npt.NDArray[np.int64]
     start: npt.NDArray[np.int64]
-    members: npt.NDArray[np.int64]
+    members: npt.NDArray[np.integer]
 
 
 def cell_edge(low: npt.NDArray[np.float64], high: npt.NDArray[np.float64], wanted: float,
@@ -36,61 +37,61 @@ def cell_edge(low: npt.NDArray[np.float64], high: npt.NDArray[np.float64], wante
     return max(wanted, (volume / MAX_CELLS) ** (1 / 3))
 
 
-def cell_lists(points: npt.NDArray[np.float64], which: npt.NDArray[np.int64],
+def cell_lists(points: npt.NDArray[np.float64], which: npt.NDArray[np.integer],
                low: npt.NDArray[np.float64], high: npt.NDArray[np.float64], cell: float,
                margin_cells: int) -> CellLists:
     """Lists `points[which]` by cell of edge `cell` over low..high grown by `margin_cells`
-    cells (points outside are left out), in the order of `which` within each cell (a counting
-    sort: beside the lists, one int64 per point and per cell for a moment)."""
+    cells (points outside are left out), in the order of `which` within each cell: a counting
+    sort that holds nothing beside the lists."""
     origin = low - margin_cells * cell
     shape = np.floor((high + margin_cells * cell - origin) / cell).astype(np.int64) + 1
-    flat = _flat_cells(points, which, origin, cell, shape)
-    start = _starts(flat, int(np.prod(shape)))
-    return CellLists(origin, cell, shape, start, _members(flat, which, start))
+    start = np.zeros(int(np.prod(shape)) + 1, np.int64)
+    _count(points, which, origin, cell, shape, start)
+    members = np.empty(int(start[-1]), dtype=which.dtype)
+    _fill(points, which, origin, cell, shape, start, members)
+    return CellLists(origin, cell, shape, start, members)
 
 
 @numba.njit(cache=True)
-def _flat_cells(points: npt.NDArray[np.float64], which: npt.NDArray[np.int64],
-                origin: npt.NDArray[np.float64], cell: float,
-                shape: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:  # pragma: no cover
-    """(len(which),) C-order number of each point's cell, -1 outside the grid."""
-    flat = np.empty(which.shape[0], np.int64)
+def _cell_of(points: npt.NDArray[np.float64], p: int, origin: npt.NDArray[np.float64],
+             cell: float, shape: npt.NDArray[np.int64]) -> int:  # pragma: no cover - numba
+    """The C-order number of point p's cell, -1 outside the grid."""
+    i = int(np.floor((points[p, 0] - origin[0]) / cell))
+    j = int(np.floor((points[p, 1] - origin[1]) / cell))
+    k = int(np.floor((points[p, 2] - origin[2]) / cell))
+    if 0 <= i < shape[0] and 0 <= j < shape[1] and 0 <= k < shape[2]:
+        return (i * shape[1] + j) * shape[2] + k
+    return -1
+
+
+@numba.njit(cache=True)
+def _count(points: npt.NDArray[np.float64], which: npt.NDArray[np.integer],
+           origin: npt.NDArray[np.float64], cell: float, shape: npt.NDArray[np.int64],
+           start: npt.NDArray[np.int64]) -> None:  # pragma: no cover - numba
+    """Fills `start` (cells + 1, zeros) with the offset of each cell's points."""
     for n in range(which.shape[0]):
-        p = which[n]
-        i = int(np.floor((points[p, 0] - origin[0]) / cell))
-        j = int(np.floor((points[p, 1] - origin[1]) / cell))
-        k = int(np.floor((points[p, 2] - origin[2]) / cell))
-        if 0 <= i < shape[0] and 0 <= j < shape[1] and 0 <= k < shape[2]:
-            flat[n] = (i * shape[1] + j) * shape[2] + k
-        else:
-            flat[n] = -1
-    return flat
-
-
-@numba.njit(cache=True)
-def _members(flat: npt.NDArray[np.int64], which: npt.NDArray[np.int64],
-             start: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:  # pragma: no cover
-    """`which` grouped by cell, in their order within each cell."""
-    members = np.empty(start[-1], np.int64)
-    fill = start[:-1].copy()
-    for n in range(flat.shape[0]):
-        f = flat[n]
-        if f >= 0:
-            members[fill[f]] = which[n]
-            fill[f] += 1
-    return members
-
-
-@numba.njit(cache=True)
-def _starts(flat: npt.NDArray[np.int64], cells: int) -> npt.NDArray[np.int64]:  # pragma: no cover
-    """(cells + 1,) offsets of each cell's points among the points inside the grid."""
-    start = np.zeros(cells + 1, np.int64)
-    for f in flat:
+        f = _cell_of(points, which[n], origin, cell, shape)
         if f >= 0:
             start[f + 1] += 1
-    for c in range(cells):
+    for c in range(start.shape[0] - 1):
         start[c + 1] += start[c]
-    return start
+
+
+@numba.njit(cache=True)
+def _fill(points: npt.NDArray[np.float64], which: npt.NDArray[np.integer],
+          origin: npt.NDArray[np.float64], cell: float, shape: npt.NDArray[np.int64],
+          start: npt.NDArray[np.int64],
+          members: npt.NDArray[np.integer]) -> None:  # pragma: no cover - numba
+    """Writes `which` into `members` by cell, using `start` as each cell's next slot, then
+    moves `start` back (each cell's next slot ends as the next cell's start)."""
+    for n in range(which.shape[0]):
+        f = _cell_of(points, which[n], origin, cell, shape)
+        if f >= 0:
+            members[start[f]] = which[n]
+            start[f] += 1
+    for c in range(start.shape[0] - 1, 0, -1):
+        start[c] = start[c - 1]
+    start[0] = 0
 
 
 def share_within(points: npt.ArrayLike, queries: npt.ArrayLike, bound: float) -> float:
@@ -103,7 +104,7 @@ def share_within(points: npt.ArrayLike, queries: npt.ArrayLike, bound: float) ->
         return 0.0
     low, high = qs.min(axis=0), qs.max(axis=0)
     cell = cell_edge(low, high, bound, 1)
-    lists = cell_lists(qs, np.arange(len(qs)), low, high, cell, 1)
+    lists = cell_lists(qs, np.arange(len(qs), dtype=np.int32), low, high, cell, 1)
     near = np.zeros(len(qs), dtype=np.bool_)
     _mark_within(pts, qs, bound * bound, lists.origin, lists.cell, lists.shape, lists.start,
                  lists.members, near)
@@ -114,7 +115,7 @@ def share_within(points: npt.ArrayLike, queries: npt.ArrayLike, bound: float) ->
 def _mark_within(points: npt.NDArray[np.float64], queries: npt.NDArray[np.float64],
                  bound2: float, origin: npt.NDArray[np.float64], cell: float,
                  shape: npt.NDArray[np.int64], start: npt.NDArray[np.int64],
-                 members: npt.NDArray[np.int64],
+                 members: npt.NDArray[np.integer],
                  near: npt.NDArray[np.bool_]) -> None:  # pragma: no cover - numba
     """Sets `near` on the queries at squared distance below `bound2` from a point (cells at
     least the bound: the cells around a point's own one hold every such query)."""

@@ -136,24 +136,30 @@ def _connected(
     Returns:
         (K,) int64 labels 0 .. n-1 numbered in C order of each component's first voxel, and n.
     """
-    nx, ny, nz = lookup.shape
+    ny, nz = lookup.shape[1], lookup.shape[2]
     count = indices.shape[0]
     for p in range(count):
         lookup[indices[p, 0], indices[p, 1], indices[p, 2]] = p
     parent = np.arange(count)
     for p in range(count):
         i, j, k = indices[p, 0], indices[p, 1], indices[p, 2]
-        for a in range(max(i - 1, 0), min(i + 2, nx)):
+        rp = _find(parent, p)
+        # Each pair is joined once, from its later voxel: only the 13 neighbours before p in
+        # C order are looked up.
+        for a in range(max(i - 1, 0), i + 1):
             for b in range(max(j - 1, 0), min(j + 2, ny)):
+                if a == i and b > j:
+                    break
                 for c in range(max(k - 1, 0), min(k + 2, nz)):
+                    if a == i and b == j and c >= k:
+                        break
                     q = lookup[a, b, c]
-                    # Each pair is joined once, from its later voxel.
-                    if q < 0 or q >= p or key[q] != key[p]:
+                    if q < 0 or key[q] != key[p]:
                         continue
-                    rp = _find(parent, p)
                     rq = _find(parent, q)
                     if rp != rq:
                         parent[max(rp, rq)] = min(rp, rq)
+                        rp = min(rp, rq)
     for p in range(count):
         lookup[indices[p, 0], indices[p, 1], indices[p, 2]] = -1
     # Each root is its component's smallest member, so numbering roots in order follows C order.

@@ -33,7 +33,9 @@ def distance_to_mesh(vertices: npt.ArrayLike, triangles: npt.ArrayLike,
         return best
     low, high = verts.min(axis=0), verts.max(axis=0)
     reach = cell_edge(low, high, FIRST_REACH_M, 2)
-    pending = np.arange(len(query))
+    # int32 indices: half the memory beside the mesh's millions of vertices.
+    pending: npt.NDArray[np.integer] = np.arange(
+        len(query), dtype=np.int32 if len(query) < 2**31 else np.int64)
     while len(pending):
         lists = cell_lists(query, pending, low, high, reach, 2)
         _nearer_within(verts, tris, lists.origin, reach, lists.shape, lists.start,
@@ -53,7 +55,7 @@ def distance_to_mesh(vertices: npt.ArrayLike, triangles: npt.ArrayLike,
 def _nearer_within(verts: npt.NDArray[np.float64], tris: npt.NDArray[np.int64],
                    origin: npt.NDArray[np.float64], reach: float,
                    shape: npt.NDArray[np.int64], start: npt.NDArray[np.int64],
-                   members: npt.NDArray[np.int64], query: npt.NDArray[np.float64],
+                   members: npt.NDArray[np.integer], query: npt.NDArray[np.float64],
                    best: npt.NDArray[np.float64]) -> None:  # pragma: no cover - numba
     """Lowers `best` (squared distances) with every triangle within `reach` of a point: each
     triangle visits the points in the cells its bounding box, grown by the reach, overlaps

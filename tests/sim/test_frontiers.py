@@ -193,3 +193,36 @@ def test_trackers_share_the_map_at_their_own_pace() -> None:
         if step % 4 == 3:
             clearance.update()
             np.testing.assert_array_equal(clearance.traversable, reference_traversable(m, 0.2))
+
+
+def test_components_are_scipys_26_connected_labels_numbered_in_c_order() -> None:
+    """`_connected` joins 26-neighbours with equal keys (looking only at the 13 neighbours
+    before each voxel): the components of scipy's labelling of each key's voxels, numbered by
+    their first voxel in C order, and the scratch grid left all -1."""
+    from scipy import ndimage
+
+    from sim.frontiers import _connected
+
+    rng = np.random.default_rng(0)
+    shape = (30, 25, 12)
+    for trial in range(12):
+        mask = rng.random(shape) < rng.uniform(0.05, 0.4)
+        indices = np.argwhere(mask).astype(np.int64)
+        keys = (rng.integers(0, 3, len(indices)) if trial % 2
+                else np.zeros(len(indices))).astype(np.int64)
+        lookup = np.full(shape, -1, dtype=np.int32)
+        labels, n = _connected(indices, keys, lookup)
+        component = np.empty(len(indices), dtype=np.int64)
+        offset = 0
+        for value in np.unique(keys):
+            chosen = keys == value
+            grid = np.zeros(shape, dtype=bool)
+            grid[tuple(indices[chosen].T)] = True
+            labelled, count = ndimage.label(grid, structure=np.ones((3, 3, 3)))
+            component[chosen] = labelled[tuple(indices[chosen].T)] + offset
+            offset += count + 1
+        _, first, inverse = np.unique(component, return_index=True, return_inverse=True)
+        expected = np.argsort(np.argsort(first))[inverse]
+        np.testing.assert_array_equal(labels, expected)
+        assert n == len(first)
+        assert (lookup == -1).all()
