@@ -54,7 +54,7 @@ def _write_flat(archive: zipfile.ZipFile, name: str, items: list[np.ndarray],
 
 
 # Past this many cells over the snapshot's bounds (a bit each), thinning sorts cell keys instead.
-MAX_BITMAP_CELLS = 1 << 29
+MAX_BITMAP_CELLS = 1 << 27  # 16 MiB of bits
 
 
 def thinned(points: np.ndarray, voxel_m: float, chunk: int = 1 << 20) -> np.ndarray:

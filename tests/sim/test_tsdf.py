@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from benchmarks.bookkeeping_ops import read_through_table
 from sim.camera import DepthCamera
 from sim.geometry import Pose
 from sim.metrics import sdf_surface_recall, surface_recall
-from sim.open3d_any import o3c
 from sim.tsdf import TsdfConfig, TsdfVolume
 
 
@@ -168,36 +168,6 @@ def test_surface_block_count_sizes_the_table_for_a_flight_of_that_surface() -> N
     assert surface_block_count(np.zeros((0, 3)), config) == 0
 
 
-def _reference_sdf_at(volume: TsdfVolume, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The field read corner by corner through Open3D's own block table (`hashmap().find`)."""
-    cfg = volume.config
-    res = cfg.block_resolution
-    scaled = np.asarray(points, dtype=np.float64) / cfg.voxel_size_m
-    base = np.floor(scaled).astype(np.int64)
-    frac = scaled - base
-    tsdf = volume._grid.attribute("tsdf").numpy().reshape(-1)
-    weights = volume._grid.attribute("weight").numpy().reshape(-1)
-    sdf = np.zeros(len(points))
-    weight = np.full(len(points), np.inf, dtype=np.float32)
-    for corner in np.ndindex(2, 2, 2):
-        off = np.array(corner)
-        vox = base + off
-        block = np.floor_divide(vox, res)
-        local = vox - block * res
-        buf, found = volume._grid.hashmap().find(o3c.Tensor(block.astype(np.int32)))
-        hit = found.numpy().astype(bool)
-        flat = buf.numpy().astype(np.int64) * res**3 + (local[:, 2] * res + local[:, 1]) * res \
-            + local[:, 0]
-        value = np.where(hit, tsdf[np.where(hit, flat, 0)], 0.0)
-        w = np.where(hit, weights[np.where(hit, flat, 0)], np.float32(0.0)).astype(np.float32)
-        sdf += np.prod(np.where(off == 1, frac, 1.0 - frac), axis=1) * value
-        weight = np.minimum(weight, w)
-    unseen = ~(weight > 0)
-    sdf[unseen] = np.nan
-    weight[unseen] = 0.0
-    return sdf * cfg.voxel_size_m * cfg.trunc_voxel_multiplier, weight
-
-
 def test_sdf_at_reads_the_field_as_open3ds_block_table_gives_it() -> None:
     """The compiled reading (`sim.tsdf_sampling`) gives, bit for bit, the trilinear field and
     least weight read through Open3D's block table, inside, outside and across blocks."""
@@ -206,7 +176,7 @@ def test_sdf_at_reads_the_field_as_open3ds_block_table_gives_it() -> None:
     probes = np.vstack([rng.uniform([-0.5, -0.5, -0.5], [6.5, 5.5, 3.0], size=(30_000, 3)),
                         rng.uniform(-0.1, 0.1, size=(2_000, 3)) + np.array([6.0, 2.5, 1.25])])
     sdf, weight = volume.sdf_at(probes)
-    ref_sdf, ref_weight = _reference_sdf_at(volume, probes)
+    ref_sdf, ref_weight = read_through_table(volume, probes)
     np.testing.assert_array_equal(sdf, ref_sdf)
     np.testing.assert_array_equal(weight, ref_weight)
     assert weight.dtype == np.float32
