@@ -216,11 +216,22 @@ def _cell_keys(indices: IndexArray, labels: IndexArray, n: int, cell_voxels: flo
     lo, hi = _label_boxes(indices, labels, n)
     extent = hi - lo + 1
     cells = np.maximum(np.ceil(extent / cell_voxels - 1e-9), 1).astype(np.int64)
-    c = cells[labels]
-    cell = ((indices - lo[labels]) * c) // extent[labels]  # (K, 3), in [0, cells)
-    cell_id = (cell[:, 0] * c[:, 1] + cell[:, 1]) * c[:, 2] + cell[:, 2]
-    result: IndexArray = labels * int(np.prod(cells, axis=1).max()) + cell_id
-    return result
+    return _voxel_cell_keys(indices, labels, lo, extent, cells, int(np.prod(cells, axis=1).max()))
+
+
+@numba.njit(cache=True)
+def _voxel_cell_keys(indices: IndexArray, labels: IndexArray, lo: IndexArray, extent: IndexArray,
+                     cells: IndexArray, stride: int) -> IndexArray:  # pragma: no cover - numba
+    """Each voxel's key: its label times `stride` plus its cell's number within its label's box
+    (cells[label] cells per axis over `extent[label]` voxels from `lo[label]`)."""
+    keys = np.empty(indices.shape[0], np.int64)
+    for p in range(indices.shape[0]):
+        lab = labels[p]
+        cx = (indices[p, 0] - lo[lab, 0]) * cells[lab, 0] // extent[lab, 0]
+        cy = (indices[p, 1] - lo[lab, 1]) * cells[lab, 1] // extent[lab, 1]
+        cz = (indices[p, 2] - lo[lab, 2]) * cells[lab, 2] // extent[lab, 2]
+        keys[p] = lab * stride + (cx * cells[lab, 1] + cy) * cells[lab, 2] + cz
+    return keys
 
 
 class FrontierTracker:

@@ -226,3 +226,26 @@ def test_components_are_scipys_26_connected_labels_numbered_in_c_order() -> None
         np.testing.assert_array_equal(labels, expected)
         assert n == len(first)
         assert (lookup == -1).all()
+
+
+def test_cell_keys_cut_each_component_box_into_equal_cells() -> None:
+    """`_cell_keys` gives each voxel its component's cell: the box cut into the fewest equal
+    cells at most `cell_voxels` wide, keys distinct across components."""
+    from sim.frontiers import _cell_keys
+
+    rng = np.random.default_rng(4)
+    indices = rng.integers(0, 60, size=(5_000, 3)).astype(np.int64)
+    labels = rng.integers(0, 7, size=5_000).astype(np.int64)
+    keys = _cell_keys(indices, labels, 7, 12.5)
+    for label in range(7):
+        mine = labels == label
+        lo, hi = indices[mine].min(axis=0), indices[mine].max(axis=0)
+        extent = hi - lo + 1
+        cells = np.maximum(np.ceil(extent / 12.5 - 1e-9), 1).astype(np.int64)
+        cell = ((indices[mine] - lo) * cells) // extent
+        assert (cell < cells).all() and (np.ceil(extent / cells) <= 13).all()
+        local = (cell[:, 0] * cells[1] + cell[:, 1]) * cells[2] + cell[:, 2]
+        # Keys are one-to-one with (component, cell).
+        pairs = {(int(k), int(c)) for k, c in zip(keys[mine], local, strict=True)}
+        assert len(pairs) == len({k for k, _ in pairs}) == len({c for _, c in pairs})
+    assert len(set(keys[labels == 0]) & set(keys[labels == 1])) == 0
