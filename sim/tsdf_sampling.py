@@ -31,14 +31,14 @@ def trilinear(grid: Any, points: npt.NDArray[np.floating], voxel_size: float) ->
         return sdf, weight
     # Voxel (i, j, k) holds the field sampled at (i, j, k) * voxel_size.
     scaled = np.asarray(points, dtype=np.float64).reshape(-1, 3) / voxel_size
-    _trilinear(scaled, blocks.keys, blocks.tsdf, blocks.weight, blocks.order,
+    _trilinear(scaled, blocks.tsdf, blocks.weight, blocks.order,
                blocks.sorted_keys, blocks.origin, blocks.span, sdf, weight)
     return sdf, weight
 
 
 @numba.njit(cache=True)
-def _trilinear(scaled: npt.NDArray[np.float64], keys: npt.NDArray[np.int32],
-               tsdf: npt.NDArray[np.float32], weight: npt.NDArray[np.float32],
+def _trilinear(scaled: npt.NDArray[np.float64], tsdf: npt.NDArray[np.float32],
+               weight: npt.NDArray[np.float32],
                order: npt.NDArray[np.int64], sorted_keys: npt.NDArray[np.int64],
                origin: npt.NDArray[np.int64], span: npt.NDArray[np.int64],
                sdf: npt.NDArray[np.float64],
