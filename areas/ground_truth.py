@@ -51,6 +51,7 @@ from areas.area import Area, GroundTruth
 from areas.cache import cache_dir
 from areas.observability import ViewModel, observability
 from areas.surface_cloud import SurfaceCloud
+from areas.surface_samples import draw, points_of, side_voxels
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -81,10 +82,7 @@ def sample_surface(
     spacing: float,
     rng: np.random.Generator,
 ) -> tuple[FloatArray, FloatArray]:
-    """Uniform samples of a triangle mesh surface.
-
-    Each triangle gets ``floor(area / spacing**2)`` points plus one more with probability equal to
-    the remainder, so large faces are covered evenly and the total matches the area.
+    """Uniform samples of a triangle mesh surface (`areas.surface_samples.draw`).
 
     Args:
         vertices: (V, 3) metres.
@@ -97,27 +95,7 @@ def sample_surface(
         normals: (N, 3) float64 unit normals of the sampled triangles (zero for degenerate ones),
             oriented by the triangle winding.
     """
-    corners = vertices[triangles]  # (F, 3, 3)
-    e1 = corners[:, 1] - corners[:, 0]
-    e2 = corners[:, 2] - corners[:, 0]
-    cross = np.cross(e1, e2)
-    twice_area = np.linalg.norm(cross, axis=1)
-    expected = 0.5 * twice_area / spacing**2
-    counts = np.floor(expected).astype(np.int64)
-    counts += rng.random(len(counts)) < (expected - counts)
-    face = np.repeat(np.arange(len(triangles)), counts)
-
-    u = rng.random(len(face))
-    v = rng.random(len(face))
-    # Fold the unit square onto the triangle to keep the distribution uniform.
-    outside = u + v > 1.0
-    u[outside] = 1.0 - u[outside]
-    v[outside] = 1.0 - v[outside]
-    points = corners[face, 0] + u[:, None] * e1[face] + v[:, None] * e2[face]
-
-    with np.errstate(invalid="ignore", divide="ignore"):
-        unit = np.where(twice_area[:, None] > 0.0, cross / twice_area[:, None], 0.0)
-    return points, unit[face]
+    return points_of(draw(vertices, triangles, spacing, rng))
 
 
 def _voxel_index(area: Area, points: FloatArray) -> tuple[IntArray, BoolArray]:
@@ -267,15 +245,12 @@ def _sample_chunks(
                                                else 0.0, SAMPLE_CHUNK_POINTS))
     edges = np.unique(np.concatenate([[0], cuts, [len(triangles)]]))
     eps = 1e-9 * max(1.0, float(np.max(np.abs(area.extent))))
+    low, high = area.bounds_min - eps, area.bounds_max + eps
     for index, (lo, hi) in enumerate(itertools.pairwise(edges)):
         rng = np.random.default_rng([seed, index])
-        points, normals = sample_surface(vertices, triangles[lo:hi], spacing, rng)
-        keep = np.all((points >= area.bounds_min - eps) & (points <= area.bounds_max + eps), axis=1)
-        points, normals = points[keep], normals[keep]
-        step = SIDE_STEP * area.voxel_size * normals
-        side_a, inside_a = _voxel_index(area, points + step)
-        side_b, inside_b = _voxel_index(area, points - step)
-        yield points.astype(np.float32), side_a, inside_a, side_b, inside_b
+        yield side_voxels(draw(vertices, triangles[lo:hi], spacing, rng), low, high,
+                          SIDE_STEP * area.voxel_size, area.bounds_min, area.voxel_size,
+                          area.grid_shape)
 
 
 def ground_truth_path(area: Area) -> Path:
