@@ -69,8 +69,11 @@ def run_episode(
         result = loop.run_with(planner, charge, platform_errors)
     finally:
         loop.close()
-    if recording_path is not None:
-        loop.recorder.save(recording_path)
+    try:
+        if recording_path is not None:
+            loop.recorder.save(recording_path)
+    finally:
+        loop.recorder.close()
     return result
 
 
@@ -129,3 +132,4 @@ class EpisodeStepper:
     def close(self) -> None:
         self._steps.close()
         self.loop.close()
+        self.loop.recorder.close()

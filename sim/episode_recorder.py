@@ -80,3 +80,7 @@ class EpisodeRecorder:
 
     def save(self, path: Path) -> None:
         self.writer.save(path)
+
+    def close(self) -> None:
+        """Let go of the recording's temporary files (after `save`, if it is kept)."""
+        self.writer.close()

@@ -8,6 +8,9 @@ Format `flybo-recording` version 1 is a NumPy `.npz` (zip, deflate) whose arrays
 from __future__ import annotations
 
 import json
+import os
+import shutil
+import tempfile
 import zipfile
 import zlib
 from dataclasses import dataclass, field
@@ -28,10 +31,10 @@ class RecordingError(ValueError):
     """The file is not a recording this version can read."""
 
 
-def _offsets(items: list[np.ndarray]) -> npt.NDArray[np.int64]:
+def _offsets(lengths: list[int]) -> npt.NDArray[np.int64]:
     """(K + 1,) start of each item in the flat sequence, and its end."""
-    offsets = np.zeros(len(items) + 1, dtype=np.int64)
-    offsets[1:] = np.cumsum([len(i) for i in items]) if items else []
+    offsets = np.zeros(len(lengths) + 1, dtype=np.int64)
+    offsets[1:] = np.cumsum(lengths) if lengths else []
     return offsets
 
 
@@ -40,17 +43,38 @@ def _write_array(archive: zipfile.ZipFile, name: str, array: np.ndarray) -> None
         np.lib.format.write_array(fh, np.asanyarray(array), allow_pickle=False)
 
 
-def _write_flat(archive: zipfile.ZipFile, name: str, items: list[np.ndarray],
-                dtype: npt.DTypeLike, width: int | None) -> None:
-    """The items one after another as one array, written item by item: a run's keyframes and
-    snapshots are never concatenated in memory (hundreds of MiB on a large area)."""
-    total = sum(len(i) for i in items)
-    header = {"descr": np.lib.format.dtype_to_descr(np.dtype(dtype)), "fortran_order": False,
-              "shape": (total,) if width is None else (total, width)}
-    with archive.open(f"{name}.npy", "w", force_zip64=True) as fh:
-        np.lib.format.write_array_header_1_0(fh, header)
-        for item in items:
-            fh.write(np.ascontiguousarray(item, dtype=dtype).tobytes())
+class Spool:
+    """A sequence of arrays of one dtype and row width kept in an unnamed temporary file
+    (`tempfile`, under TMPDIR) as they come, not in memory: a large area's keyframes and
+    surface snapshots reach hundreds of MiB by the end of a run, which is when its final
+    measures need the most memory. `write_npy` writes them as one array, item after item."""
+
+    def __init__(self, dtype: npt.DTypeLike, width: int | None) -> None:
+        self.dtype, self.width = np.dtype(dtype), width
+        self.lengths: list[int] = []
+        self._file = tempfile.TemporaryFile()  # noqa: SIM115  held for the run, closed by `close`
+
+    def append(self, item: np.ndarray) -> None:
+        row = () if self.width is None else (self.width,)
+        array = np.ascontiguousarray(item, dtype=self.dtype)
+        if array.shape[1:] != row:
+            raise ValueError(f"an item of shape {array.shape} in a sequence of rows {row}")
+        self._file.write(array.data)
+        self.lengths.append(len(array))
+
+    def write_npy(self, archive: zipfile.ZipFile, name: str) -> None:
+        total = sum(self.lengths)
+        header = {"descr": np.lib.format.dtype_to_descr(self.dtype), "fortran_order": False,
+                  "shape": (total,) if self.width is None else (total, self.width)}
+        self._file.flush()
+        self._file.seek(0)
+        with archive.open(f"{name}.npy", "w", force_zip64=True) as fh:
+            np.lib.format.write_array_header_1_0(fh, header)
+            shutil.copyfileobj(self._file, fh, 1 << 20)
+        self._file.seek(0, os.SEEK_END)
+
+    def close(self) -> None:
+        self._file.close()
 
 
 # Past this many cells over the snapshot's bounds (a bit each), thinning sorts cell keys instead.
@@ -117,18 +141,19 @@ def _first_in_cells(points: npt.NDArray[Any], voxel: float, lo: npt.NDArray[np.i
 
 @dataclass
 class RecordingWriter:
-    """Collects a run as it happens; `save` writes it once."""
+    """Collects a run as it happens, its long sequences in temporary files (`Spool`); `save`
+    writes the archive, `close` lets the files go."""
 
     header: dict[str, Any]
     _pose_times: list[float] = field(default_factory=list)
     _poses: list[np.ndarray] = field(default_factory=list)
     _key_times: list[float] = field(default_factory=list)
-    _key_indices: list[np.ndarray] = field(default_factory=list)
-    _key_states: list[np.ndarray] = field(default_factory=list)
+    _key_indices: Spool = field(default_factory=lambda: Spool(np.uint32, None))
+    _key_states: Spool = field(default_factory=lambda: Spool(np.uint8, None))
     _plan_times: list[float] = field(default_factory=list)
-    _plans: list[np.ndarray] = field(default_factory=list)
+    _plans: Spool = field(default_factory=lambda: Spool(np.float32, 4))
     _surface_times: list[float] = field(default_factory=list)
-    _surfaces: list[np.ndarray] = field(default_factory=list)
+    _surfaces: Spool = field(default_factory=lambda: Spool(np.float32, 3))
     _previous_state: np.ndarray | None = None
 
     def pose(self, time: float, position: np.ndarray, yaw: float) -> None:
@@ -158,8 +183,8 @@ class RecordingWriter:
             values = now[where]
             self._previous_state[box] = now
         self._key_times.append(time)
-        self._key_indices.append(changed.astype(np.uint32))
-        self._key_states.append(values.astype(np.uint8))
+        self._key_indices.append(changed)
+        self._key_states.append(values)
 
     def plan(self, time: float, waypoints: np.ndarray) -> None:
         self._plan_times.append(time)
@@ -168,34 +193,36 @@ class RecordingWriter:
     def surface(self, time: float, points: np.ndarray, voxel_m: float) -> None:
         """Store the reconstructed surface at `time`, thinned to one point per `voxel_m` cell."""
         self._surface_times.append(time)
-        self._surfaces.append(thinned(np.asarray(points), voxel_m).astype(np.float32, copy=False))
+        self._surfaces.append(thinned(np.asarray(points), voxel_m))
 
     def save(self, path: Path) -> None:
-        """Write the archive (what `np.savez_compressed` writes), one array at a time."""
+        """Write the archive (what `np.savez_compressed` writes), one array at a time; the
+        writer can save again, or be closed."""
         header = {**self.header, "format": FORMAT, "version": VERSION}
         small = {
             "header": np.array(json.dumps(header)),
             "pose_times": np.array(self._pose_times, dtype=np.float64),
             "poses": np.array(self._poses, dtype=np.float32).reshape(-1, 4),
             "keyframe_times": np.array(self._key_times, dtype=np.float64),
-            "keyframe_offsets": _offsets(self._key_indices),
+            "keyframe_offsets": _offsets(self._key_indices.lengths),
             "plan_times": np.array(self._plan_times, dtype=np.float64),
-            "plan_offsets": _offsets(self._plans),
+            "plan_offsets": _offsets(self._plans.lengths),
             "surface_times": np.array(self._surface_times, dtype=np.float64),
-            "surface_offsets": _offsets(self._surfaces),
+            "surface_offsets": _offsets(self._surfaces.lengths),
         }
-        flat: dict[str, tuple[list[np.ndarray], npt.DTypeLike, int | None]] = {
-            "keyframe_indices": (self._key_indices, np.uint32, None),
-            "keyframe_states": (self._key_states, np.uint8, None),
-            "plan_waypoints": (self._plans, np.float32, 4),
-            "surface_points": (self._surfaces, np.float32, 3),
-        }
+        flat = {"keyframe_indices": self._key_indices, "keyframe_states": self._key_states,
+                "plan_waypoints": self._plans, "surface_points": self._surfaces}
         with zipfile.ZipFile(path, mode="w", compression=zipfile.ZIP_DEFLATED,
                              allowZip64=True) as archive:
             for name, array in small.items():
                 _write_array(archive, name, array)
-            for name, (items, dtype, width) in flat.items():
-                _write_flat(archive, name, items, dtype, width)
+            for name, spool in flat.items():
+                spool.write_npy(archive, name)
+
+    def close(self) -> None:
+        """Let go of the sequences' temporary files."""
+        for spool in (self._key_indices, self._key_states, self._plans, self._surfaces):
+            spool.close()
 
 
 class Recording:

@@ -9,7 +9,15 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from sim.recording import FORMAT, VERSION, Recording, RecordingError, RecordingWriter, thinned
+from sim.recording import (
+    FORMAT,
+    VERSION,
+    Recording,
+    RecordingError,
+    RecordingWriter,
+    Spool,
+    thinned,
+)
 from sim.voxel_grid import IndexBox
 
 SHAPE = (4, 3, 2)
@@ -298,7 +306,8 @@ def test_the_archive_holds_the_sequences_as_if_concatenated(tmp_path: Path) -> N
     np.testing.assert_array_equal(replayed.map_state_at(10.0), states[-1])
 
 
-def test_keyframes_compared_in_the_changed_box_are_those_of_the_whole_grid() -> None:
+def test_keyframes_compared_in_the_changed_box_are_those_of_the_whole_grid(
+        tmp_path: Path) -> None:
     # The same map history written twice: once comparing whole grids, once told a box that
     # holds every change since the previous keyframe (sometimes larger, sometimes empty).
     rng = np.random.default_rng(8)
@@ -320,9 +329,41 @@ def test_keyframes_compared_in_the_changed_box_are_those_of_the_whole_grid() -> 
             box = IndexBox(tuple(int(v) for v in grown), tuple(int(v) for v in hi))
         whole.map_keyframe(float(t), state)
         boxed.map_keyframe(float(t), state, box)
-    assert len(whole._key_indices) == len(boxed._key_indices) == 40
-    for a, b in zip(whole._key_indices, boxed._key_indices, strict=True):
-        assert a.dtype == b.dtype and np.array_equal(a, b)
-    for a, b in zip(whole._key_states, boxed._key_states, strict=True):
-        assert a.dtype == b.dtype and np.array_equal(a, b)
-    assert sum(len(a) for a in whole._key_indices) > 100
+    whole.save(tmp_path / "whole.npz")
+    boxed.save(tmp_path / "boxed.npz")
+    a, b = Recording(tmp_path / "whole.npz"), Recording(tmp_path / "boxed.npz")
+    for name in ("keyframe_times", "keyframe_offsets", "keyframe_indices", "keyframe_states"):
+        assert a.array(name).dtype == b.array(name).dtype
+        assert np.array_equal(a.array(name), b.array(name)), name
+    assert len(a.array("keyframe_times")) == 40
+    assert len(a.array("keyframe_indices")) > 100
+
+
+def test_saved_twice_the_same_archive_and_closed_after(tmp_path: Path) -> None:
+    # The sequences wait in temporary files: saving reads them from the start each time, and
+    # the writer goes on appending after a save.
+    writer = RecordingWriter(header=dict(HEADER))
+    writer.map_keyframe(0.0, keyframe_states()[0])
+    writer.surface(1.0, SURFACE_POINTS, 0.1)
+    writer.save(tmp_path / "a.npz")
+    writer.save(tmp_path / "b.npz")
+    a, b = Recording(tmp_path / "a.npz"), Recording(tmp_path / "b.npz")
+    for name in ("keyframe_indices", "keyframe_states", "surface_points", "surface_offsets"):
+        assert np.array_equal(a.array(name), b.array(name)), name
+    writer.surface(2.0, SURFACE_POINTS[:3], 0.1)
+    writer.save(tmp_path / "c.npz")
+    c = Recording(tmp_path / "c.npz")
+    assert np.array_equal(c.surface_at(1.5), a.surface_at(1.5))
+    assert len(c.surface_at(2.5)) == len(thinned(SURFACE_POINTS[:3], 0.1))
+    writer.close()
+    with pytest.raises(ValueError):
+        writer.save(tmp_path / "d.npz")
+
+
+def test_a_spool_refuses_rows_of_another_width() -> None:
+    spool = Spool(np.float32, 3)
+    spool.append(np.zeros((4, 3)))
+    with pytest.raises(ValueError, match="rows"):
+        spool.append(np.zeros((4, 2), dtype=np.float32))
+    assert spool.lengths == [4]
+    spool.close()
