@@ -42,13 +42,43 @@ def distance_to_mesh(vertices: npt.ArrayLike, triangles: npt.ArrayLike,
                        lists.members, query, best)
         # A point whose least distance found is within the reach has its exact distance: every
         # triangle that close was tried. Once the reach spans the mesh and the points, all have.
-        span = np.maximum(high, query[pending].max(axis=0)) - np.minimum(
-            low, query[pending].min(axis=0))
-        if reach >= float(np.linalg.norm(span)):
+        # (Compiled: the pending points' box and those still farther than the reach without
+        # copying millions of them, at the run's memory peak.)
+        box_low, box_high = low.copy(), high.copy()
+        _grow_box(query, pending, box_low, box_high)
+        if reach >= float(np.linalg.norm(box_high - box_low)):
             break
-        pending = pending[best[pending] > reach * reach]
+        pending = _farther_than(best, pending, reach * reach)
         reach *= 2.0
     return np.sqrt(best, out=best)
+
+
+@numba.njit(cache=True)
+def _grow_box(query: npt.NDArray[np.float64], which: npt.NDArray[np.integer],
+              low: npt.NDArray[np.float64], high: npt.NDArray[np.float64],
+              ) -> None:  # pragma: no cover - numba
+    """Grows the box low..high to hold `query[which]`."""
+    for n in range(which.shape[0]):
+        for ax in range(3):
+            v = query[which[n], ax]
+            low[ax] = min(low[ax], v)
+            high[ax] = max(high[ax], v)
+
+
+@numba.njit(cache=True)
+def _farther_than(best: npt.NDArray[np.float64], which: npt.NDArray[np.integer],
+                  limit: float) -> npt.NDArray[np.integer]:  # pragma: no cover - numba
+    """The entries of `which` whose `best` exceeds `limit`, in order."""
+    kept = 0
+    for n in range(which.shape[0]):
+        kept += best[which[n]] > limit
+    out = np.empty(kept, dtype=which.dtype)
+    kept = 0
+    for n in range(which.shape[0]):
+        if best[which[n]] > limit:
+            out[kept] = which[n]
+            kept += 1
+    return out
 
 
 @numba.njit(cache=True)

@@ -119,7 +119,8 @@ def surface_scores(
     recall = surface_recall(reconstruction, truth, tau_m)
     # Summed in sorted order: Open3D extracts mesh vertices in a thread-dependent order, and the
     # score must not depend on it.
-    rmse = float(np.sqrt(np.mean(np.square(np.sort(to_truth)))))
+    squares = np.sort(to_truth)
+    rmse = float(np.sqrt(np.mean(np.square(squares, out=squares))))
     return SurfaceScores(tau_m, precision, recall, fscore(precision, recall), rmse)
 
 

@@ -1,4 +1,5 @@
-"""The compiled surface sampling gives the array expressions' samples and voxels, bit for bit."""
+"""The compiled surface sampling places the draws and finds their voxels as the array expressions
+do, bit for bit; the draws themselves are array expressions (`areas.surface_samples.draw`)."""
 
 from __future__ import annotations
 
@@ -6,33 +7,20 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from areas.surface_samples import draw, points_of, side_voxels
+from areas.surface_samples import Draws, draw, points_of, side_voxels
 
 FloatArray = npt.NDArray[np.float64]
 
 
-def _reference_points(vertices: FloatArray, triangles: npt.NDArray[np.int64], spacing: float,
-                      seed: int) -> tuple[FloatArray, FloatArray]:
-    """The sampling as array expressions, drawing the same numbers in the same order."""
-    rng = np.random.default_rng(seed)
-    corners = vertices[triangles]
-    e1 = corners[:, 1] - corners[:, 0]
-    e2 = corners[:, 2] - corners[:, 0]
-    cross = np.cross(e1, e2)
-    twice_area = np.linalg.norm(cross, axis=1)
-    expected = 0.5 * twice_area / spacing**2
-    counts = np.floor(expected).astype(np.int64)
-    counts += rng.random(len(counts)) < (expected - counts)
-    face = np.repeat(np.arange(len(triangles)), counts)
-    u = rng.random(len(face))
-    v = rng.random(len(face))
+def _reference_points(d: Draws) -> tuple[FloatArray, FloatArray]:
+    """The compiled loops' placement as array expressions over the same draws."""
+    face = np.repeat(np.arange(len(d.counts)), d.counts)
+    u, v = d.u.copy(), d.v.copy()
     outside = u + v > 1.0
     u[outside] = 1.0 - u[outside]
     v[outside] = 1.0 - v[outside]
-    points = corners[face, 0] + u[:, None] * e1[face] + v[:, None] * e2[face]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        unit = np.where(twice_area[:, None] > 0.0, cross / twice_area[:, None], 0.0)
-    return points, unit[face]
+    points = d.origin[face] + u[:, None] * d.edge1[face] + v[:, None] * d.edge2[face]
+    return points, d.normal[face]
 
 
 def _reference_voxels(points: FloatArray, origin: FloatArray, voxel_size: float,
@@ -70,8 +58,9 @@ def test_points_and_side_voxels_match_the_array_expressions(kind: str) -> None:
     rng = np.random.default_rng(7)
     vertices, triangles = _mesh(kind, rng)
     spacing, seed = 0.02, 11
-    points, normals = points_of(draw(vertices, triangles, spacing, np.random.default_rng(seed)))
-    ref_points, ref_normals = _reference_points(vertices, triangles, spacing, seed)
+    draws = draw(vertices, triangles, spacing, np.random.default_rng(seed))
+    points, normals = points_of(draws)
+    ref_points, ref_normals = _reference_points(draws)
     assert len(points) > 10_000
     assert np.array_equal(points, ref_points)
     assert np.array_equal(normals, ref_normals)
@@ -80,8 +69,7 @@ def test_points_and_side_voxels_match_the_array_expressions(kind: str) -> None:
     low, high = origin - 1e-9, origin + np.array(shape) * voxel_size + 1e-9
     step = 1e-4 * voxel_size
     kept32, side_a, inside_a, side_b, inside_b = side_voxels(
-        draw(vertices, triangles, spacing, np.random.default_rng(seed)), low, high, step,
-        origin, voxel_size, shape)
+        draws, low, high, step, origin, voxel_size, shape)
     keep = np.all((ref_points >= low) & (ref_points <= high), axis=1)
     assert 0 < keep.sum() < len(keep) or kind == "voxel faces"
     ref_kept, ref_normals = ref_points[keep], ref_normals[keep]
