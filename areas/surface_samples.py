@@ -70,12 +70,16 @@ def draw(vertices: FloatArray, triangles: npt.NDArray[np.integer], spacing: floa
 
 
 @numba.njit(cache=True, inline="always")
-def _point(d_origin: FloatArray, d_e1: FloatArray, d_e2: FloatArray, t: int, u: float,
-           v: float, axis: int) -> float:
+def _folded(u: float, v: float) -> tuple[float, float]:
     # The fold keeps the distribution uniform over the triangle.
     if u + v > 1.0:
-        u = 1.0 - u
-        v = 1.0 - v
+        return 1.0 - u, 1.0 - v
+    return u, v
+
+
+@numba.njit(cache=True, inline="always")
+def _point(d_origin: FloatArray, d_e1: FloatArray, d_e2: FloatArray, t: int, u: float,
+           v: float, axis: int) -> float:
     p = d_origin[t, axis] + u * d_e1[t, axis]
     return p + v * d_e2[t, axis]
 
@@ -89,8 +93,9 @@ def _points(origin: FloatArray, e1: FloatArray, e2: FloatArray, normal: FloatArr
     s = 0
     for t in range(counts.shape[0]):
         for _ in range(counts[t]):
+            fu, fv = _folded(u[s], v[s])
             for axis in range(3):
-                points[s, axis] = _point(origin, e1, e2, t, u[s], v[s], axis)
+                points[s, axis] = _point(origin, e1, e2, t, fu, fv, axis)
                 normals[s, axis] = normal[t, axis]
             s += 1
     return points, normals
@@ -133,8 +138,9 @@ def _sides(origin: FloatArray, e1: FloatArray, e2: FloatArray, normal: FloatArra
     for t in range(counts.shape[0]):
         for _ in range(counts[t]):
             keep = True
+            fu, fv = _folded(u[s], v[s])
             for axis in range(3):
-                p[axis] = _point(origin, e1, e2, t, u[s], v[s], axis)
+                p[axis] = _point(origin, e1, e2, t, fu, fv, axis)
                 keep = keep and low[axis] <= p[axis] <= high[axis]
             s += 1
             if not keep:
