@@ -68,7 +68,7 @@ def call_planner(planner: PlannerLike, request: PlanRequest, charge: PlanningCha
                  platform_errors: tuple[type[BaseException], ...]) -> PlanReply:
     """Ask `planner`, timing the call and charging it as `charge` says. A planner's exception
     becomes a failure; `platform_errors` (a worker's time limit) propagate."""
-    t0, cpu0 = time.perf_counter(), charge.cpu_seconds()
+    t0, clocks = time.perf_counter(), charge.read()
     try:
         plan = planner.plan(request.observation)
     except platform_errors:
@@ -76,7 +76,7 @@ def call_planner(planner: PlannerLike, request: PlanRequest, charge: PlanningCha
     except Exception as exc:  # a planner bug ends its run, not the process
         return PlanReply(failure=f"planner raised {type(exc).__name__}: {exc}")
     wall = time.perf_counter() - t0
-    return PlanReply(plan, wall, charge.seconds(wall, charge.cpu_seconds() - cpu0))
+    return PlanReply(plan, wall, charge.charge(wall, clocks))
 
 
 @dataclass(frozen=True)

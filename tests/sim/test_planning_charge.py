@@ -5,11 +5,15 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 
+import numba
 import numpy as np
+import numpy.typing as npt
 import pytest
 
 from areas import load_area, load_ground_truth
+from sim.compile_clock import compiling_seconds, cpu_seconds_less_compiling
 from sim.config import preset
 from sim.episode import run_episode
 from sim.interface import Observation, Plan, PlannerContext
@@ -80,3 +84,54 @@ def test_a_planner_in_another_process_is_charged_by_its_own_clock() -> None:
     before = charge.cpu_seconds()
     assert charge.seconds(0.0, charge.cpu_seconds() - before) == pytest.approx(0.25)
     assert charge.describe()["clock"] == "sandbox"
+    assert "compiling_left_out_s" not in charge.describe()
+
+
+def _fresh_kernel() -> Callable[[npt.NDArray[np.float64]], float]:
+    """A numba kernel no cache holds (defined per call, cache off): its first call compiles."""
+
+    @numba.njit(cache=False)
+    def kernel(values: npt.NDArray[np.float64]) -> float:  # pragma: no cover - numba
+        total = 0.0
+        for i in range(values.shape[0]):
+            for j in range(i % 7):
+                total += np.sin(values[i]) * np.cos(values[i] + j) / (1.0 + j)
+        return total
+
+    return kernel
+
+
+class _Compiles(_Hover):
+    """Compiles a new numba kernel in its first planning call, then only calls it."""
+
+    def __init__(self) -> None:
+        super().__init__("none")
+        self.kernel = _fresh_kernel()
+
+    def plan(self, obs: Observation) -> Plan:
+        self.kernel(np.linspace(0.0, 1.0, 100))
+        return super().plan(obs)
+
+
+def test_compiling_numba_kernels_is_left_out_of_the_cpu_clock() -> None:
+    kernel = _fresh_kernel()
+    cpu0, less0, compiling0 = time.process_time(), cpu_seconds_less_compiling(), compiling_seconds()
+    kernel(np.linspace(0.0, 1.0, 100))
+    spent = time.process_time() - cpu0
+    compiled = compiling_seconds() - compiling0
+    assert compiled > 0.05 and compiled <= spent + 1e-3, (compiled, spent)
+    assert cpu_seconds_less_compiling() - less0 < 0.2 * spent
+    # Called again, nothing compiles.
+    compiling1 = compiling_seconds()
+    kernel(np.linspace(0.0, 1.0, 100))
+    assert compiling_seconds() == compiling1
+
+
+def test_a_planner_is_not_charged_for_compiling() -> None:
+    area = load_area("maze")
+    cfg = preset("default").model_copy(update={"startup_spin": False})
+    result = run_episode(area, load_ground_truth(area), _Compiles(), cfg, 0, seconds=1.0,
+                         speed_factor=1.0)
+    payload = result.to_json()["planning_charge"]
+    assert payload["compiling_left_out_s"] > 0.05
+    assert result.charged_s[0] < 0.2 * payload["compiling_left_out_s"], result.charged_s
