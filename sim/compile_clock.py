@@ -21,16 +21,18 @@ import time
 
 from numba.core import event
 
-__all__ = ["compiling_seconds", "cpu_seconds_less_compiling"]
+__all__ = ["compiling_seconds", "compiling_wall_seconds", "cpu_seconds_less_compiling"]
 
 
 class _CompileTimer(event.Listener):
-    """Process CPU time spent in outermost holds of numba's compiler lock."""
+    """Process CPU time and wall time spent in outermost holds of numba's compiler lock."""
 
     def __init__(self) -> None:
         self.total = 0.0
+        self.total_wall = 0.0
         self._depth = 0
         self._started = 0.0
+        self._started_wall = 0.0
         # The compiler lock lets one thread in at a time, but its events start before it is
         # taken: another thread's start may arrive while one holds it.
         self._lock = threading.Lock()
@@ -39,6 +41,7 @@ class _CompileTimer(event.Listener):
         with self._lock:
             if self._depth == 0:
                 self._started = time.process_time()
+                self._started_wall = time.perf_counter()
             self._depth += 1
 
     def on_end(self, event: event.Event) -> None:
@@ -46,12 +49,19 @@ class _CompileTimer(event.Listener):
             self._depth -= 1
             if self._depth == 0:
                 self.total += time.process_time() - self._started
+                self.total_wall += time.perf_counter() - self._started_wall
 
     def seconds(self) -> float:
-        """Compilation so far, the one under way included."""
+        """CPU time in the compiler so far, the hold under way included."""
         with self._lock:
             running = time.process_time() - self._started if self._depth else 0.0
             return self.total + running
+
+    def wall_seconds(self) -> float:
+        """Wall time in the compiler so far, the hold under way included."""
+        with self._lock:
+            running = time.perf_counter() - self._started_wall if self._depth else 0.0
+            return self.total_wall + running
 
 
 _TIMER = _CompileTimer()
@@ -62,6 +72,11 @@ def compiling_seconds() -> float:
     """CPU seconds this process has spent in numba's compiler (compiling, loading cached
     code)."""
     return _TIMER.seconds()
+
+
+def compiling_wall_seconds() -> float:
+    """Wall seconds this process has spent in numba's compiler."""
+    return _TIMER.wall_seconds()
 
 
 def cpu_seconds_less_compiling() -> float:

@@ -55,7 +55,8 @@ class PlanRequest:
 
 @dataclass(frozen=True)
 class PlanReply:
-    """What came back: `plan` (anything; the loop checks it is a `Plan`), the call's wall time,
+    """What came back: `plan` (anything; the loop checks it is a `Plan`), the call's wall time
+    (less numba's compiler for a planner in this process, `PlanningCharge.settle`),
     the simulated seconds to charge for it, or the failure that ended the planner's run."""
 
     plan: object = None
@@ -75,8 +76,8 @@ def call_planner(planner: PlannerLike, request: PlanRequest, charge: PlanningCha
         raise
     except Exception as exc:  # a planner bug ends its run, not the process
         return PlanReply(failure=f"planner raised {type(exc).__name__}: {exc}")
-    wall = time.perf_counter() - t0
-    return PlanReply(plan, wall, charge.charge(wall, clocks))
+    wall, charged = charge.settle(time.perf_counter() - t0, clocks)
+    return PlanReply(plan, wall, charged)
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ for a planner in this process, the process's CPU time over the call (every threa
 a sandbox, the sandbox's processes' CPU time as the kernel counts it (its `cpu_seconds()`).
 The CPU time is scaled by the machine's speed factor (`sim.reference_speed`), so a charged
 second is a second of the reference machine whatever the load or the machine. In this process,
-the time numba spends compiling kernels is left out (`sim.compile_clock`): it depends on the
+the time numba spends in its compiler is left out (`sim.compile_clock`): it depends on the
 installation's kernel cache, not on the method.
 """
 
@@ -16,17 +16,23 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, Literal, NamedTuple
 
-from sim.compile_clock import compiling_seconds, cpu_seconds_less_compiling
+from sim.compile_clock import (
+    compiling_seconds,
+    compiling_wall_seconds,
+    cpu_seconds_less_compiling,
+)
 
 ChargeMode = Literal["cpu", "wall", "none"]
 
 
 class ClockReading(NamedTuple):
-    """The clocks at a call's start: `cpu_s` the charged CPU clock, `compiling_s` numba's
-    compilation in this process (left out of `cpu_s`)."""
+    """The clocks at a call's start: `cpu_s` the charged CPU clock; `compiling_s` and
+    `compiling_wall_s` the CPU and wall time numba's compiler has taken in this process (left
+    out of the call's charge and of its thinking time)."""
 
     cpu_s: float
     compiling_s: float
+    compiling_wall_s: float
 
 
 class PlanningCharge:
@@ -38,22 +44,28 @@ class PlanningCharge:
         self.mode, self.speed_factor = mode, float(speed_factor)
         clock = getattr(planner, "cpu_seconds", None)
         self.external = callable(clock)
-        in_process = mode == "cpu" and not self.external
         # Only the 'cpu' mode reads a clock; the others never touch the planner's.
         self.cpu_seconds: Callable[[], float] = (
             (clock if callable(clock) else cpu_seconds_less_compiling) if mode == "cpu"
             else _zero)
-        self._compiling: Callable[[], float] = compiling_seconds if in_process else _zero
+        # A planner in this process is not charged for numba's compiler, nor is its thinking
+        # time counted with it; one in a sandbox is charged what the kernel counts (its own
+        # report is never trusted).
+        local = not self.external
+        self._compiling: Callable[[], float] = compiling_seconds if local else _zero
+        self._compiling_wall: Callable[[], float] = compiling_wall_seconds if local else _zero
         self.compiling_left_out_s = 0.0
 
     def read(self) -> ClockReading:
         """The clocks now, at the start of a call."""
-        return ClockReading(self.cpu_seconds(), self._compiling())
+        return ClockReading(self.cpu_seconds(), self._compiling(), self._compiling_wall())
 
-    def charge(self, wall_s: float, start: ClockReading) -> float:
-        """Simulated seconds for a call that started at `start` and took `wall_s`."""
+    def settle(self, wall_s: float, start: ClockReading) -> tuple[float, float]:
+        """For a call that started at `start` and took `wall_s`: its thinking time (the wall
+        time less numba's compiler) and the simulated seconds it is charged."""
         self.compiling_left_out_s += self._compiling() - start.compiling_s
-        return self.seconds(wall_s, self.cpu_seconds() - start.cpu_s)
+        thinking_s = max(wall_s - (self._compiling_wall() - start.compiling_wall_s), 0.0)
+        return thinking_s, self.seconds(thinking_s, self.cpu_seconds() - start.cpu_s)
 
     def seconds(self, wall_s: float, cpu_s: float) -> float:
         """Simulated seconds charged for a call that took `wall_s` and used `cpu_s`."""
@@ -69,8 +81,8 @@ class PlanningCharge:
         if self.mode == "cpu":
             record["speed_factor"] = self.speed_factor
             record["clock"] = "sandbox" if self.external else "process"
-            if not self.external:
-                record["compiling_left_out_s"] = self.compiling_left_out_s
+        if self.mode != "none" and not self.external:
+            record["compiling_left_out_s"] = self.compiling_left_out_s
         return record
 
 
