@@ -3,11 +3,12 @@
 A numba kernel is compiled the first time it is called with new argument types, or loaded from
 numba's on-disk cache if the cache holds it. Which of the two happens depends on the
 installation, not on the method: on a fresh install the first run of a planner was charged
-seconds of compilation in one planning call (7.7 s for Classic's first call on MAZE against
-0.05 s with the cache filled) and flew another run. So the in-process planning charge reads
+seconds of compilation in one planning call (7.3 s for Classic's first call on MAZE against
+0.06 s with the cache filled) and flew another run. So the in-process planning charge reads
 this clock, which leaves out the CPU time spent holding numba's compiler lock (events of kind
 "numba:compiler_lock", `numba.core.event`): compiling, and loading and saving cached code. A
-kernel that calls others takes the lock again inside; only the outermost hold is timed.
+kernel that calls others takes the lock again inside; only the outermost hold is timed. The
+process's CPU time is read, so another thread's work during a hold is left out with it.
 
 A planner in a sandbox is charged by the kernel's count of its processes' CPU time: nothing it
 reports is trusted, so compilation there is charged; the sandbox starts with the worker's
