@@ -84,7 +84,7 @@ def _farther_than(best: npt.NDArray[np.float64], which: npt.NDArray[np.integer],
 @numba.njit(cache=True)
 def _nearer_within(verts: npt.NDArray[np.float64], tris: npt.NDArray[np.int64],
                    origin: npt.NDArray[np.float64], reach: float,
-                   shape: npt.NDArray[np.int64], start: npt.NDArray[np.int64],
+                   shape: npt.NDArray[np.int64], start: npt.NDArray[np.integer],
                    members: npt.NDArray[np.integer], query: npt.NDArray[np.float64],
                    best: npt.NDArray[np.float64]) -> None:  # pragma: no cover - numba
     """Lowers `best` (squared distances) with every triangle within `reach` of a point: each
