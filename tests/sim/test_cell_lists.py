@@ -46,3 +46,4 @@ def test_empty_clouds_and_the_lists() -> None:
         members = lists.members[lists.start[c]:lists.start[c + 1]]
         np.testing.assert_array_equal(members, np.flatnonzero(flat == c))
     assert lists.start[-1] == 4
+    assert lists.start.dtype == np.int32  # half the table's memory below 2^31 points
