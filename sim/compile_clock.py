@@ -22,7 +22,8 @@ import time
 
 from numba.core import event
 
-__all__ = ["compiling_seconds", "compiling_wall_seconds", "cpu_seconds_less_compiling"]
+__all__ = ["compiler_spent", "compiling_seconds", "compiling_wall_seconds",
+           "cpu_seconds_less_compiling"]
 
 
 class _CompileTimer(event.Listener):
@@ -52,34 +53,35 @@ class _CompileTimer(event.Listener):
                 self.total += time.process_time() - self._started
                 self.total_wall += time.perf_counter() - self._started_wall
 
-    def seconds(self) -> float:
-        """CPU time in the compiler so far, the hold under way included."""
+    def spent(self) -> tuple[float, float]:
+        """CPU and wall seconds in the compiler so far, the hold under way included."""
         with self._lock:
-            running = time.process_time() - self._started if self._depth else 0.0
-            return self.total + running
-
-    def wall_seconds(self) -> float:
-        """Wall time in the compiler so far, the hold under way included."""
-        with self._lock:
-            running = time.perf_counter() - self._started_wall if self._depth else 0.0
-            return self.total_wall + running
+            if not self._depth:
+                return self.total, self.total_wall
+            return (self.total + time.process_time() - self._started,
+                    self.total_wall + time.perf_counter() - self._started_wall)
 
 
 _TIMER = _CompileTimer()
 event.register("numba:compiler_lock", _TIMER)
 
 
+def compiler_spent() -> tuple[float, float]:
+    """CPU and wall seconds this process has spent in numba's compiler."""
+    return _TIMER.spent()
+
+
 def compiling_seconds() -> float:
     """CPU seconds this process has spent in numba's compiler (compiling, loading cached
     code)."""
-    return _TIMER.seconds()
+    return _TIMER.spent()[0]
 
 
 def compiling_wall_seconds() -> float:
     """Wall seconds this process has spent in numba's compiler."""
-    return _TIMER.wall_seconds()
+    return _TIMER.spent()[1]
 
 
 def cpu_seconds_less_compiling() -> float:
     """The process's CPU time (every thread) less `compiling_seconds()`."""
-    return time.process_time() - _TIMER.seconds()
+    return time.process_time() - _TIMER.spent()[0]

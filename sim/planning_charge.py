@@ -16,11 +16,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, Literal, NamedTuple
 
-from sim.compile_clock import (
-    compiling_seconds,
-    compiling_wall_seconds,
-    cpu_seconds_less_compiling,
-)
+from sim.compile_clock import compiler_spent, cpu_seconds_less_compiling
 
 ChargeMode = Literal["cpu", "wall", "none"]
 
@@ -51,20 +47,20 @@ class PlanningCharge:
         # A planner in this process is not charged for numba's compiler, nor is its thinking
         # time counted with it; one in a sandbox is charged what the kernel counts (its own
         # report is never trusted).
-        local = not self.external
-        self._compiling: Callable[[], float] = compiling_seconds if local else _zero
-        self._compiling_wall: Callable[[], float] = compiling_wall_seconds if local else _zero
+        self._compiler: Callable[[], tuple[float, float]] = (
+            _zeros if self.external else compiler_spent)
         self.compiling_left_out_s = 0.0
 
     def read(self) -> ClockReading:
         """The clocks now, at the start of a call."""
-        return ClockReading(self.cpu_seconds(), self._compiling(), self._compiling_wall())
+        return ClockReading(self.cpu_seconds(), *self._compiler())
 
     def settle(self, wall_s: float, start: ClockReading) -> tuple[float, float]:
         """For a call that started at `start` and took `wall_s`: its thinking time (the wall
         time less numba's compiler) and the simulated seconds it is charged."""
-        self.compiling_left_out_s += self._compiling() - start.compiling_s
-        thinking_s = max(wall_s - (self._compiling_wall() - start.compiling_wall_s), 0.0)
+        compiling_s, compiling_wall_s = self._compiler()
+        self.compiling_left_out_s += compiling_s - start.compiling_s
+        thinking_s = max(wall_s - (compiling_wall_s - start.compiling_wall_s), 0.0)
         return thinking_s, self.seconds(thinking_s, self.cpu_seconds() - start.cpu_s)
 
     def seconds(self, wall_s: float, cpu_s: float) -> float:
@@ -88,3 +84,7 @@ class PlanningCharge:
 
 def _zero() -> float:
     return 0.0
+
+
+def _zeros() -> tuple[float, float]:
+    return 0.0, 0.0
