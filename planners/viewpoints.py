@@ -19,6 +19,9 @@ from planners.search import BoolGrid, IndexArray
 from sim.map_view import FrontierCluster, MapView
 from sim.occupancy import VoxelState
 
+_UNKNOWN = int(VoxelState.UNKNOWN)
+_OCCUPIED = int(VoxelState.OCCUPIED)
+
 FACES = np.array([(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)],
                  dtype=np.int64)
 
@@ -42,9 +45,11 @@ class Viewpoints:
 
 
 @numba.njit(cache=True)
-def _line_clear(blocked: BoolGrid, a: npt.NDArray[np.float64],
-                b: npt.NDArray[np.float64]) -> bool:
-    """Whether no voxel strictly between the end voxels of a→b (voxel units) is blocked."""
+def _line_clear(grid: npt.NDArray[np.bool_] | npt.NDArray[np.uint8], blocked: int,
+                a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> bool:
+    """Whether no voxel strictly between the end voxels of a→b (voxel units) holds `blocked`
+    in `grid`: True in a mask, or a `VoxelState` in the map's state grid (read in place; a
+    mask of it made per call cost more than the lines on the large areas)."""
     ai, aj, ak = int(np.floor(a[0])), int(np.floor(a[1])), int(np.floor(a[2]))
     bi, bj, bk = int(np.floor(b[0])), int(np.floor(b[1])), int(np.floor(b[2]))
     length = np.sqrt(np.sum((b - a) ** 2))
@@ -56,9 +61,20 @@ def _line_clear(blocked: BoolGrid, a: npt.NDArray[np.float64],
         k = int(np.floor(a[2] + (b[2] - a[2]) * t))
         if (i == ai and j == aj and k == ak) or (i == bi and j == bj and k == bk):
             continue
-        if blocked[i, j, k]:
+        if grid[i, j, k] == blocked:
             return False
     return True
+
+
+@numba.njit(cache=True)
+def _lines_clear_of(grid: npt.NDArray[np.bool_] | npt.NDArray[np.uint8], blocked: int,
+                    a: npt.NDArray[np.float64],
+                    b: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
+    """`lines_clear` where the voxels holding `blocked` in `grid` block."""
+    out = np.ones(a.shape[0], dtype=np.bool_)
+    for r in range(a.shape[0]):
+        out[r] = _line_clear(grid, blocked, a[r], b[r])
+    return out
 
 
 @numba.njit(cache=True)
@@ -67,43 +83,40 @@ def lines_clear(
 ) -> npt.NDArray[np.bool_]:
     """For each pair a[i]→b[i] (voxel units), whether no voxel strictly between the two end
     voxels is blocked."""
-    out = np.ones(a.shape[0], dtype=np.bool_)
-    for r in range(a.shape[0]):
-        out[r] = _line_clear(blocked, a[r], b[r])
-    return out
+    return _lines_clear_of(blocked, True, a, b)
 
 
 @numba.njit(cache=True)
-def _sees_one(occupied: BoolGrid, state: npt.NDArray[np.uint8], unknown: int,
-              eye: npt.NDArray[np.float64], voxel: npt.NDArray[np.int64]) -> bool:
-    """Whether the line of sight from `eye` to an unknown face neighbour of `voxel` is clear."""
+def _sees_one(state: npt.NDArray[np.uint8], eye: npt.NDArray[np.float64],
+              voxel: npt.NDArray[np.int64]) -> bool:
+    """Whether the line of sight from `eye` to an unknown face neighbour of `voxel` crosses no
+    occupied voxel (`state`: the map's (nx, ny, nz) `VoxelState`)."""
     si, sj, sk = state.shape
     end = np.empty(3, dtype=np.float64)
     for f in range(FACES.shape[0]):
         i = voxel[0] + FACES[f, 0]
         j = voxel[1] + FACES[f, 1]
         k = voxel[2] + FACES[f, 2]
-        if not (0 <= i < si and 0 <= j < sj and 0 <= k < sk) or state[i, j, k] != unknown:
+        if not (0 <= i < si and 0 <= j < sj and 0 <= k < sk) or state[i, j, k] != _UNKNOWN:
             continue
         end[0], end[1], end[2] = i + 0.5, j + 0.5, k + 0.5
-        if _line_clear(occupied, eye, end):
+        if _line_clear(state, _OCCUPIED, eye, end):
             return True
     return False
 
 
 @numba.njit(cache=True)
-def _sees_into_unknown(occupied: BoolGrid, state: npt.NDArray[np.uint8], unknown: int,
-                       eyes: npt.NDArray[np.float64],
+def _sees_into_unknown(state: npt.NDArray[np.uint8], eyes: npt.NDArray[np.float64],
                        voxels: npt.NDArray[np.int64]) -> npt.NDArray[np.bool_]:
     seen = np.zeros(voxels.shape[0], dtype=np.bool_)
     for r in range(voxels.shape[0]):
-        seen[r] = _sees_one(occupied, state, unknown, eyes[r], voxels[r])
+        seen[r] = _sees_one(state, eyes[r], voxels[r])
     return seen
 
 
 @numba.njit(cache=True)
-def _first_in_sight(occupied: BoolGrid, state: npt.NDArray[np.uint8], unknown: int,
-                    into_unknown: bool, eyes: npt.NDArray[np.int64],
+def _first_in_sight(state: npt.NDArray[np.uint8], into_unknown: bool,
+                    eyes: npt.NDArray[np.int64],
                     targets: npt.NDArray[np.int64], pair_t: npt.NDArray[np.int64],
                     rows: npt.NDArray[np.int64]) -> int:
     """The first of `rows` whose line of sight from its eye voxel's centre to its target
@@ -116,9 +129,9 @@ def _first_in_sight(occupied: BoolGrid, state: npt.NDArray[np.uint8], unknown: i
         for a in range(3):
             eye[a] = eyes[r, a] + 0.5
             aim[a] = targets[t, a] + 0.5
-        if not _line_clear(occupied, eye, aim):
+        if not _line_clear(state, _OCCUPIED, eye, aim):
             continue
-        if into_unknown and not _sees_one(occupied, state, unknown, eye, targets[t]):
+        if into_unknown and not _sees_one(state, eye, targets[t]):
             continue
         return r
     return -1
@@ -277,8 +290,8 @@ class ViewpointCandidates:
             lo, hi = np.searchsorted(self._by_eye, [flat * n, (flat + 1) * n])
             view = self._view
             self._first[flat] = _first_in_sight(
-                view.occupied, view.state, int(VoxelState.UNKNOWN), self._into_unknown,
-                self._voxels, self._target_idx, self._pair_t, self._by_eye[lo:hi] % n,
+                view.state, self._into_unknown, self._voxels, self._target_idx, self._pair_t,
+                self._by_eye[lo:hi] % n,
             )
         return self._first[flat]
 
@@ -300,7 +313,7 @@ class ViewpointCandidates:
         eyes_c: npt.NDArray[np.float64] = np.add(self._voxels, 0.5, dtype=np.float64)
         if len(rows):
             aims: npt.NDArray[np.float64] = np.add(targets, 0.5, dtype=np.float64)
-            rows = rows[lines_clear(self._view.occupied, eyes_c, aims)]
+            rows = rows[_lines_clear_of(self._view.state, _OCCUPIED, eyes_c, aims)]
         if self._into_unknown and len(rows):
             rows = rows[sees_into_unknown(self._view, eyes_c[rows], targets[rows])]
         return Viewpoints(self._voxels[rows], targets[rows], self._target_ids[self._pair_t[rows]])
@@ -314,6 +327,5 @@ def sees_into_unknown(view: MapView, eyes: npt.NDArray[np.float64],
     A frontier voxel no such line reaches cannot be cleared from that eye: the free voxels a
     floor slab's surface shares with grazing rays, say, lie over the slab's interior, unknown
     for good, that the occupied floor voxels around them hide."""
-    return _sees_into_unknown(view.occupied, view.state, int(VoxelState.UNKNOWN),
-                              np.ascontiguousarray(eyes, dtype=np.float64),
+    return _sees_into_unknown(view.state, np.ascontiguousarray(eyes, dtype=np.float64),
                               np.ascontiguousarray(voxels, dtype=np.int64))

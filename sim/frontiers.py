@@ -110,6 +110,23 @@ def _unknown_directions(state: StateGrid, indices: IndexArray) -> FloatArray:
 
 
 @numba.njit(cache=True)
+def _label_sums(state: StateGrid, indices: IndexArray, labels: IndexArray, n: int,
+                origin: FloatArray, voxel_size: float) -> tuple[FloatArray, FloatArray]:
+    """Per label, the (n, 3) sums of its voxels' `_unknown_directions` and of their centres
+    (world: origin + (index + 0.5) * voxel_size), added in the order of `indices` (K, 3); one
+    pass instead of a grid of directions and centres and six weighted counts."""
+    directions = _unknown_directions(state, indices)
+    dir_sums = np.zeros((n, 3))
+    centre_sums = np.zeros((n, 3))
+    for p in range(indices.shape[0]):
+        lab = labels[p]
+        for a in range(3):
+            dir_sums[lab, a] += directions[p, a]
+            centre_sums[lab, a] += origin[a] + (indices[p, a] + 0.5) * voxel_size
+    return dir_sums, centre_sums
+
+
+@numba.njit(cache=True)
 def _find(parent: IndexArray, p: int) -> int:
     """Root of p in the union-find forest `parent`, compressing the path on the way."""
     root = p
@@ -190,18 +207,26 @@ def _label_boxes(indices: IndexArray, labels: IndexArray, n: int) -> tuple[Index
 
 @numba.njit(cache=True)
 def _true_indices(mask: BoolGrid, count: int) -> IndexArray:
-    """(count, 3) int64 indices of the True voxels of `mask`, in C order; count is their number."""
-    nx, ny, nz = mask.shape
+    """(count, 3) int64 indices of the True voxels of `mask`, in C order; count is their number.
+
+    Reads the grid eight voxels at a time and looks closer only where one is set: frontier
+    voxels are a small share of the grid, and this runs at every call for clusters."""
+    _, ny, nz = mask.shape
+    flat = mask.ravel()
+    whole = flat.size // 8
+    words = flat[:whole * 8].view(np.uint64)
     out = np.empty((count, 3), dtype=np.int64)
     p = 0
-    for i in range(nx):
-        for j in range(ny):
-            for k in range(nz):
-                if mask[i, j, k]:
-                    out[p, 0] = i
-                    out[p, 1] = j
-                    out[p, 2] = k
-                    p += 1
+    for w in range(whole + 1):
+        if w < whole and words[w] == 0:
+            continue
+        for v in range(w * 8, min(w * 8 + 8, flat.size)):
+            if flat[v]:
+                q = v // nz
+                out[p, 0] = q // ny
+                out[p, 1] = q - (q // ny) * ny
+                out[p, 2] = v - q * nz
+                p += 1
     return out
 
 
@@ -310,11 +335,9 @@ class FrontierTracker:
         labels, n = _connected(indices, keys, self._lookup)
 
         sizes = np.bincount(labels, minlength=n)
-        directions = _unknown_directions(self._map.state, indices)
-        centres = self._map.index_to_world(indices)
-        mean_dir = np.stack([np.bincount(labels, directions[:, a], n) for a in range(3)], axis=1)
-        centroid = np.stack([np.bincount(labels, centres[:, a], n) for a in range(3)],
-                            axis=1) / sizes[:, None]
+        mean_dir, centre_sums = _label_sums(self._map.state, indices, labels, n,
+                                            self._map.origin, self._map.voxel_size)
+        centroid = centre_sums / sizes[:, None]
         norm = np.linalg.norm(mean_dir, axis=1)
         normal = np.zeros_like(mean_dir)
         nonzero = norm > 1e-12

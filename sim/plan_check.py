@@ -17,8 +17,8 @@ from areas.area import Area
 from sim.config import EpisodeConfig
 from sim.flight import Flight
 from sim.interface import Plan, PlanOutcome
-from sim.map_view import MappingStack
-from sim.search_checks import plan_is_clear
+from sim.map_view import BoolGrid, MappingStack, MapView
+from sim.search_checks import plan_is_clear, starts_traversable
 from sim.trajectory import (
     Trajectory,
     TrajectoryError,
@@ -28,6 +28,15 @@ from sim.trajectory import (
 )
 
 Start = npt.NDArray[np.float64] | TrajectorySample
+
+
+def _free_mask(view: MapView, here: npt.NDArray[np.float64]) -> BoolGrid:
+    """The known-free mask `plan_is_clear` needs for legs from `here`: read only when `here` is
+    not traversable, so the traversable mask stands in otherwise (the free mask is a pass over
+    the whole grid, made per view)."""
+    if starts_traversable(view.traversable, view.origin, view.voxel_size, here):
+        return view.traversable
+    return view.free
 
 
 class PlanChecker:
@@ -56,8 +65,8 @@ class PlanChecker:
         view = self.mapping.view()
         moving = isinstance(start, TrajectorySample)
         here = start.position if isinstance(start, TrajectorySample) else start[:3]
-        clear = plan_is_clear(view.traversable, view.free, view.origin, view.voxel_size, here,
-                              wps[:, :3])
+        clear = plan_is_clear(view.traversable, _free_mask(view, here), view.origin,
+                              view.voxel_size, here, wps[:, :3])
         if clear == 0:
             return None, PlanOutcome.BLOCKED, wps
         wps = wps[:clear]
@@ -97,5 +106,5 @@ class PlanChecker:
         escape = float(np.sum(np.linalg.norm(np.diff(samples[: first + 1], axis=0), axis=1)))
         if escape > self.cfg.safety_radius_m:
             return False
-        return plan_is_clear(view.traversable, view.free, view.origin, view.voxel_size, here,
-                             samples[1:]) == len(samples) - 1
+        return plan_is_clear(view.traversable, _free_mask(view, here), view.origin,
+                             view.voxel_size, here, samples[1:]) == len(samples) - 1

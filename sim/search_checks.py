@@ -50,6 +50,21 @@ def segment_in_mask(
     return True
 
 
+def starts_traversable(
+    traversable: npt.NDArray[np.bool_],
+    origin: npt.NDArray[np.float64],
+    voxel_size: float,
+    start: npt.NDArray[np.float64],
+) -> bool:
+    """Whether `start` (world (3,)) lies in a traversable voxel, as `plan_is_clear` places it:
+    then no leg escapes, and its `free` mask is never read (any array of the grid's shape may
+    stand in for it, sparing a pass over the grid to make one)."""
+    a = (np.asarray(start, dtype=np.float64) - origin) / voxel_size
+    i, j, k = (int(np.floor(v)) for v in a)
+    nx, ny, nz = traversable.shape
+    return 0 <= i < nx and 0 <= j < ny and 0 <= k < nz and bool(traversable[i, j, k])
+
+
 def plan_is_clear(
     traversable: npt.NDArray[np.bool_],
     free: npt.NDArray[np.bool_],

@@ -13,7 +13,7 @@ from scipy.spatial import cKDTree
 from sim.clearance import TraversabilityTracker, guaranteed_clearance_m
 from sim.config import EpisodeConfig
 from sim.occupancy import OccupancyMap, VoxelState
-from sim.search_checks import plan_is_clear, segment_cube_sq
+from sim.search_checks import plan_is_clear, segment_cube_sq, starts_traversable
 
 BoolGrid = npt.NDArray[np.bool_]
 IndexArray = npt.NDArray[np.int64]
@@ -260,3 +260,37 @@ def test_doors_pass_as_the_rule_implies(voxel_size: float, width_m: float,
     if passes:
         # Exactly one column when the free run is the least the rule needs.
         assert int(through.sum()) == n_free - free_run_needed(radius_m, voxel_size) + 1
+
+
+def test_the_free_mask_is_read_only_when_the_start_is_not_traversable() -> None:
+    """Where `starts_traversable` holds, `plan_is_clear` gives the same answer with any mask in
+    place of the free one (the plan checker passes the traversable mask then); from starts that
+    are not traversable, some legs escape through free voxels only the free mask allows."""
+    rng = np.random.default_rng(11)
+    radius_m = EpisodeConfig().safety_radius_m
+    voxel_size = 0.1
+    origin = np.array([-0.7, 0.3, -0.2])
+    seen = {True: 0, False: 0}
+    escaped = 0
+    for _ in range(4):
+        state = random_state(rng, (30, 30, 16), obstacles=0.0006)
+        trav = TraversabilityTracker(map_with(state, voxel_size), radius_m).traversable
+        free = state == VoxelState.FREE
+        for _ in range(200):
+            start = origin + rng.uniform(0.2, 0.8, 3) * np.array(state.shape) * voxel_size
+            # Short legs, so that many are clear.
+            points = start + np.cumsum(rng.uniform(-0.4, 0.4, (3, 3)), axis=0)
+            inside = starts_traversable(trav, origin, voxel_size, start)
+            voxel = np.floor((start - origin) / voxel_size).astype(int)
+            assert inside == bool(trav[tuple(voxel)])
+            seen[inside] += 1
+            clear = plan_is_clear(trav, free, origin, voxel_size, start, points)
+            if inside:
+                assert plan_is_clear(trav, trav, origin, voxel_size, start, points) == clear
+                assert plan_is_clear(trav, np.ones_like(free), origin, voxel_size, start,
+                                     points) == clear
+            else:
+                escaped += clear > plan_is_clear(trav, trav, origin, voxel_size, start, points)
+    assert min(seen.values()) > 50
+    assert escaped > 0
+    assert not starts_traversable(trav, origin, voxel_size, origin - 1.0)

@@ -249,3 +249,17 @@ def test_cell_keys_cut_each_component_box_into_equal_cells() -> None:
         pairs = {(int(k), int(c)) for k, c in zip(keys[mine], local, strict=True)}
         assert len(pairs) == len({k for k, _ in pairs}) == len({c for _, c in pairs})
     assert len(set(keys[labels == 0]) & set(keys[labels == 1])) == 0
+
+
+@pytest.mark.parametrize("shape", [(30, 25, 12), (7, 3, 5), (1, 1, 3), (9, 9, 8)])
+def test_true_indices_are_numpys_argwhere(shape: tuple[int, int, int]) -> None:
+    """`_true_indices` (eight voxels read at a time) lists the set voxels in C order, grids
+    whose size is not a multiple of eight and voxels in the last, partial word included."""
+    from sim.frontiers import _true_indices
+
+    rng = np.random.default_rng(len(shape) + shape[0])
+    for density in (0.0, 0.01, 0.3, 1.0):
+        mask = rng.random(shape) < density
+        mask.reshape(-1)[-1] = density > 0.0
+        got = _true_indices(mask, int(np.count_nonzero(mask)))
+        np.testing.assert_array_equal(got, np.argwhere(mask))
