@@ -2,17 +2,19 @@
 
     .venv/bin/python benchmarks/paper_findings.py [--planners classic rapid ...] \
         [--areas maze warehouse ...] [--runs 5 | --seeds 0 3] [--preset default] \
-        [--seconds S] [--jobs 2] [--name NAME] [--load A.json B.json]
+        [--seconds S] [--jobs 2] [--name NAME] [--load A.json B.json] [--bootstrap 1000]
     .venv/bin/python benchmarks/paper_findings.py --sweep benchmarks/results/crash_sweep.jsonl
 
 Flies every planner x area x seed to the area's plateau time (or `--seconds`), `--jobs` runs at
 a time in separate processes, then prints per area the relative coverage (the leaderboard's:
 explored observable volume over the best planner's mean on that area) and the F-score beside the
 paper's, the Kendall tau between our average ranks and the paper's (both ranked over the planners
-and areas flown here), and each finding of the paper's sections 4.1-4.3 marked held, not held or
-not measured. `--load` reads the runs of earlier JSONs instead of flying (subsets flown apart
-are compared together); `--sweep` reads a crash sweep's runs (one per cell, no RMSE). Writes
-`benchmarks/results/paper_findings.json` (or `--name`).
+and areas flown here), how far each tau moves when every cell's runs are drawn again with
+replacement (`--bootstrap`, where cells hold several seeds), and each finding of the paper's
+sections 4.1-4.3 marked held, not held or not measured. `--load` reads the runs of earlier JSONs
+instead of flying (subsets flown apart are compared together); `--sweep` reads a crash sweep's
+runs (a cell's seeds averaged; no RMSE). Writes `benchmarks/results/paper_findings.json` (or
+`--name`).
 """
 
 from __future__ import annotations
@@ -161,6 +163,43 @@ def compare(runs: list[dict[str, Any]]) -> dict[str, Any]:
             "findings": findings(ours)}
 
 
+def tau_intervals(runs: list[dict[str, Any]], replicates: int,
+                  rng: np.random.Generator) -> dict[str, dict[str, float]]:
+    """How far the Kendall taus of `compare` move with the seeds: the runs of each cell
+    (planner family x area) are drawn again with replacement, as many as it has, `replicates`
+    times; per score, the 5th and 95th percentiles of the taus and the share of draws at or
+    above the issue's targets (coverage 0.6, F-score 0.5). Cells of one run each, or scores a
+    draw cannot rank, give no interval."""
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for run in runs:
+        groups.setdefault((family(run["planner"]), run["area"]), []).append(run)
+    if all(len(m) < 2 for m in groups.values()):
+        return {}
+    reference = compare(runs)
+    paper = reference["average_ranks"]
+    taus: dict[str, list[float]] = {"relative": [], "fscore": []}
+    for _ in range(replicates):
+        drawn = [m[i] for m in groups.values() for i in rng.integers(0, len(m), len(m))]
+        ours = our_cells(drawn)
+        for key in taus:
+            value = tau(average_ranks(ours, key, False), paper[key]["paper"])
+            if value is not None:
+                taus[key].append(value)
+    out = {}
+    for key, values in taus.items():
+        if values:
+            target = TAU_TARGETS[key]
+            out[key] = {"p5": float(np.percentile(values, 5)),
+                        "p95": float(np.percentile(values, 95)),
+                        "share_at_target": float(np.mean(np.array(values) >= target)),
+                        "target": target, "replicates": len(values)}
+    return out
+
+
+# The Kendall taus the benchmark's faithfulness is held to (coverage ranks, F-score ranks).
+TAU_TARGETS = {"relative": 0.6, "fscore": 0.5}
+
+
 def _fmt(value: float | None, digits: int = 4) -> str:
     return "-" if value is None else f"{value:.{digits}f}"
 
@@ -181,6 +220,12 @@ def report(summary: dict[str, Any]) -> None:
     print(f"\nKendall tau of average ranks, ours against the paper's over the same planners and "
           f"areas: coverage {_fmt(taus['relative'], 2)}, F-score {_fmt(taus['fscore'], 2)}, "
           f"RMSE {_fmt(taus['rmse'], 2)}")
+    for key, name in (("relative", "coverage"), ("fscore", "F-score")):
+        spread = summary.get("tau_intervals", {}).get(key)
+        if spread:
+            print(f"  {name}: 5-95 % of {spread['replicates']} draws of the seeds per cell "
+                  f"{spread['p5']:.2f} to {spread['p95']:.2f}; at or above "
+                  f"{spread['target']:.1f} in {100 * spread['share_at_target']:.0f} %")
     print_table("The paper's findings (sections 4.1-4.3)", ["section", "status", "finding"],
                 [[f["section"], f["status"], f["finding"]] for f in summary["findings"]])
 
@@ -204,6 +249,8 @@ def main() -> None:
     parser.add_argument("--benchmark", default=None,
                         help="with --sweep: the benchmark version whose runs to take "
                              "(default: this tree's)")
+    parser.add_argument("--bootstrap", type=int, default=1000,
+                        help="draws of each cell's runs for the taus' spread (0: none)")
     parser.add_argument("--name", default="paper_findings",
                         help="the JSON's name under benchmarks/results/")
     args = parser.parse_args()
@@ -214,6 +261,9 @@ def main() -> None:
     else:
         runs = fly_all(args)
     summary = compare(runs)
+    if args.bootstrap > 0:
+        # A fixed seed: the same runs give the same intervals.
+        summary["tau_intervals"] = tau_intervals(runs, args.bootstrap, np.random.default_rng(0))
     report(summary)
     path = write_json(args.name, {
         "command": "python benchmarks/paper_findings.py " + " ".join(sys.argv[1:]),

@@ -14,7 +14,9 @@ import pytest
 # The benchmark scripts are not an installed package: they run from the project folder.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.paper_findings import compare, our_cells, paper_cells, sweep_runs
+import numpy as np
+
+from benchmarks.paper_findings import compare, our_cells, paper_cells, sweep_runs, tau_intervals
 from benchmarks.paper_reference import (
     AREAS,
     PAPER_TABLE2,
@@ -123,3 +125,33 @@ def test_a_crash_sweep_log_is_compared_on_coverage_and_fscore_alone(tmp_path: Pa
 
     with pytest.raises(SystemExit, match=r"no run of benchmark 1999\.01-1"):
         sweep_runs(log, "1999.01-1")
+
+
+def _paper_ordered_runs(spread: float, seeds: int) -> list[dict[str, Any]]:
+    """Runs on two areas whose mean coverage follows the paper's Table 2 order exactly, each
+    seed moved by up to `spread` m³ around it."""
+    rng = np.random.default_rng(1)
+    runs = []
+    for area in ("maze", "warehouse"):
+        column = AREAS.index(area)
+        for planner in PLANNERS:
+            mean = 1000.0 * PAPER_TABLE2[planner][column]
+            for seed, shift in enumerate(np.linspace(-spread, spread, seeds)):
+                runs.append(_run(f"{planner}-v9", area, mean + shift + rng.uniform(0, 1e-6),
+                                 PAPER_TABLE3_FSCORE[planner][column], seed))
+    return runs
+
+
+def test_tau_intervals_are_narrow_when_seeds_agree_and_wide_when_they_do_not() -> None:
+    steady = tau_intervals(_paper_ordered_runs(0.01, 5), 200, np.random.default_rng(0))
+    assert steady["relative"]["p5"] == pytest.approx(compare(
+        _paper_ordered_runs(0.01, 5))["kendall_tau"]["relative"], abs=0.05)
+    assert steady["relative"]["p95"] - steady["relative"]["p5"] < 0.1
+    assert steady["relative"]["replicates"] == 200
+    noisy = tau_intervals(_paper_ordered_runs(30.0, 5), 200, np.random.default_rng(0))
+    assert noisy["relative"]["p95"] - noisy["relative"]["p5"] > 0.3
+    assert 0.0 <= noisy["relative"]["share_at_target"] <= 1.0
+    # The same draws give the same interval; one run per cell gives none.
+    again = tau_intervals(_paper_ordered_runs(30.0, 5), 200, np.random.default_rng(0))
+    assert again == noisy
+    assert tau_intervals(_paper_ordered_runs(30.0, 1), 200, np.random.default_rng(0)) == {}
