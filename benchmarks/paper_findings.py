@@ -95,8 +95,11 @@ def our_cells(runs: list[dict[str, Any]]) -> Cells:
         best[area] = max(best.get(area, 0.0), mean)
     cells: Cells = {}
     for (name, area), members in groups.items():
+        coverages = [m["coverage"] for m in members]
         cell = {
-            "coverage": float(np.mean([m["coverage"] for m in members])),
+            "coverage": float(np.mean(coverages)),
+            "coverage_min": float(min(coverages)), "coverage_max": float(max(coverages)),
+            "runs": len(members),
             "relative": float(np.mean([relative_coverage(_explored(m), best[area])
                                        for m in members])),
         }
@@ -216,6 +219,17 @@ def report(summary: dict[str, Any]) -> None:
             rows.append([p, *cells, f"{_fmt(r['ours'].get(p), 2)} / "
                          f"{_fmt(r['paper'].get(p), 2)}"])
         print_table(f"{title}: ours / the paper's", ["planner", *areas, "avg rank"], rows)
+    rows = []
+    for p in summary["planners"]:
+        cells = []
+        for a in areas:
+            c = ours[p].get(a)
+            cells.append("-" if c is None else
+                         f"{100 * c['coverage']:.1f} ({100 * c['coverage_min']:.1f}-"
+                         f"{100 * c['coverage_max']:.1f}, {c['runs']})")
+        rows.append([p, *cells])
+    print_table("Coverage of the observable volume, %: mean (least-most, runs)",
+                ["planner", *areas], rows)
     taus = summary["kendall_tau"]
     print(f"\nKendall tau of average ranks, ours against the paper's over the same planners and "
           f"areas: coverage {_fmt(taus['relative'], 2)}, F-score {_fmt(taus['fscore'], 2)}, "
