@@ -1,8 +1,11 @@
 """FLYBO: an open benchmark for autonomous exploration planners of flying robots."""
 
 from flybo.cpu_kernels import pin_cpu_kernels
+from flybo.lean_imports import skip_open3d_web_viewer
 
 # Before anything imports NumPy: the same kernels on every machine (`flybo.cpu_kernels`).
 pin_cpu_kernels()
+# Before anything imports Open3D: not its notebook viewer's web stack (`flybo.lean_imports`).
+skip_open3d_web_viewer()
 
 __version__ = "0.1.0"
