@@ -8,8 +8,10 @@ One run per planner, area and seed, one after the other in this process, to the 
 time (or `--seconds`). Planning time per `plan` call is given twice: as the process's CPU time
 (what the default preset charges to the simulated clock, before the machine's speed factor, and
 what a busy machine does not inflate) and as wall time (the run's `planning_time_ms`). The tree's
-size at the last call shows whether it stays bounded. `docs/planners/esm.md` holds the figures
-this script gave.
+size at the last call shows whether it stays bounded. The simulated seconds charged are split
+into those of calls made at rest (the vehicle hovers) and of calls made in flight (it flies on).
+The explored volume is given at each quarter of the run, with the first times it reached 95 and
+99 % of the run's final explored volume. `docs/planners/esm.md` holds the figures this script gave.
 """
 
 from __future__ import annotations
@@ -29,23 +31,42 @@ from benchmarks.common import print_table, write_json
 from planners.registry import make, spec
 from sim.config import preset
 from sim.episode import run_episode
-from sim.interface import Observation, Plan
+from sim.interface import Observation, Plan, PlanOutcome
+from sim.result import EpisodeResult
 
 
-def _timed(planner: Any) -> list[tuple[float, float, int]]:
-    """Wrap `planner.plan` to log (time, CPU ms, tree nodes) per call."""
-    log: list[tuple[float, float, int]] = []
+def _timed(planner: Any) -> list[tuple[float, float, int, bool]]:
+    """Wrap `planner.plan` to log (time, CPU ms, tree nodes, asked in flight) per call."""
+    log: list[tuple[float, float, int, bool]] = []
     inner = planner.plan
 
     def plan(obs: Observation) -> Plan:
         t0 = time.process_time()
         result = inner(obs)
         log.append((obs.time, 1000.0 * (time.process_time() - t0),
-                    int(result.info.get("nodes", 0))))
+                    int(result.info.get("nodes", 0)),
+                    obs.last_outcome == PlanOutcome.FLYING))
         return result
 
     planner.plan = plan
     return log
+
+
+def coverage_course(result: EpisodeResult) -> dict[str, Any]:
+    """The explored volume (m³) at each quarter of the run and the first simulated times it
+    reached 95 and 99 % of the run's final explored volume."""
+    times, volume = result.volume_times, result.volume_m3
+    if len(times) == 0 or volume[-1] <= 0:
+        return {"quarters": [], "t95_s": None, "t99_s": None}
+    share = volume / volume[-1]
+    quarters = [float(np.interp(q * result.sim_seconds, times, volume))
+                for q in (0.25, 0.5, 0.75)]
+
+    def first(level: float) -> float | None:
+        reached = np.flatnonzero(share >= level)
+        return float(times[reached[0]]) if len(reached) else None
+
+    return {"quarters": quarters, "t95_s": first(0.95), "t99_s": first(0.99)}
 
 
 def fly(planner_id: str, area_name: str, seed: int, preset_name: str,
@@ -57,8 +78,11 @@ def fly(planner_id: str, area_name: str, seed: int, preset_name: str,
     t0 = time.perf_counter()
     result = run_episode(area, load_ground_truth(area), planner, preset(preset_name), seed,
                          planner_name=pid, preset_name=preset_name, seconds=seconds)
-    cpu = np.array([ms for _, ms, _ in log]) if log else np.zeros(1)
+    cpu = np.array([ms for _, ms, _, _ in log]) if log else np.zeros(1)
     half = len(log) // 2
+    charged = np.asarray(result.charged_s, dtype=np.float64)
+    in_flight = np.array([f for *_, f in log], dtype=bool)
+    split = len(charged) == len(in_flight)  # one charge per logged call
     return {
         "planner": pid, "area": area_name, "seed": seed, "coverage": result.coverage,
         "status": result.status.value, "reason": result.reason,
@@ -71,9 +95,18 @@ def fly(planner_id: str, area_name: str, seed: int, preset_name: str,
         "cpu_ms_median_second_half": float(np.median(cpu[half:])) if half else None,
         "wall_ms_median": float(np.median(result.planning_times_ms))
         if len(result.planning_times_ms) else None,
-        "nodes_last": log[-1][2] if log else 0, "nodes_max": max((n for *_, n in log), default=0),
+        "nodes_last": log[-1][2] if log else 0,
+        "nodes_max": max((n for _, _, n, _ in log), default=0),
+        "calls_in_flight": int(np.count_nonzero(in_flight)),
+        "charged_at_rest_s": float(charged[~in_flight].sum()) if split else None,
+        "charged_in_flight_s": float(charged[in_flight].sum()) if split else None,
+        **coverage_course(result),
         "fscore": result.surface.fscore, "wall_s": time.perf_counter() - t0,
     }
+
+
+def _seconds(value: float | None) -> str:
+    return "-" if value is None else f"{value:.0f}"
 
 
 def main() -> None:
@@ -96,9 +129,15 @@ def main() -> None:
                       flush=True)
     print_table(
         f"ESM versions, preset {args.preset}",
-        ["area", "seed", "planner", "coverage %", "plans", "CPU ms median (1st / 2nd half)",
-         "CPU ms p90", "wall ms median", "nodes (last / max)", "path m", "F-score", "end"],
-        [[r["area"], r["seed"], r["planner"], f"{100 * r['coverage']:.1f}", r["iterations"],
+        ["area", "seed", "planner", "coverage %", "explored m³ at 1/4, 1/2, 3/4 of the run",
+         "95 % / 99 % of the end at s", "plans (in flight)", "charged s at rest / in flight",
+         "CPU ms median (1st / 2nd half)", "CPU ms p90", "wall ms median", "nodes (last / max)",
+         "path m", "F-score", "end"],
+        [[r["area"], r["seed"], r["planner"], f"{100 * r['coverage']:.1f}",
+          ", ".join(f"{q:.0f}" for q in r["quarters"]),
+          f"{_seconds(r['t95_s'])} / {_seconds(r['t99_s'])}",
+          f"{r['iterations']} ({r['calls_in_flight']})",
+          f"{_seconds(r['charged_at_rest_s'])} / {_seconds(r['charged_in_flight_s'])}",
           f"{r['cpu_ms_median']:.1f} ({r['cpu_ms_median_first_half'] or 0:.1f} / "
           f"{r['cpu_ms_median_second_half'] or 0:.1f})", f"{r['cpu_ms_p90']:.1f}",
           f"{r['wall_ms_median'] or 0:.1f}", f"{r['nodes_last']} / {r['nodes_max']}",

@@ -16,6 +16,7 @@ from planners.aep import Aep, AepV1, AepV3
 from planners.api import Planner
 from planners.classic import Classic, ClassicV2
 from planners.esm import EsmRecon, EsmV1
+from planners.esm_continuous import EsmContinuous, EsmReconContinuous
 from planners.esm_horizon import EsmHorizon, EsmHorizonV3, EsmReconHorizon, EsmReconHorizonV3
 from planners.falcon import Falcon, FalconV2
 from planners.fuel import Fuel, FuelV2
@@ -134,6 +135,18 @@ BUILTINS: tuple[tuple[str, int, type[Planner], str, str], ...] = (
     (
         "esm-recon", 3, EsmReconHorizonV3,
         "As esm-recon-v2, with esm-ipp-v3's large-area tree on outdoor areas.",
+        _ESM_REFERENCE,
+    ),
+    (
+        "esm-ipp", 4, EsmContinuous,
+        "As esm-ipp-v3, growing the tree while the vehicle flies (asked mid-leg once the "
+        "flight is under way), as the original expands continuously; at a segment's end it "
+        "only selects.",
+        _ESM_REFERENCE,
+    ),
+    (
+        "esm-recon", 4, EsmReconContinuous,
+        "As esm-recon-v3, growing the tree while the vehicle flies, as esm-ipp-v4.",
         _ESM_REFERENCE,
     ),
     (

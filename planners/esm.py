@@ -117,7 +117,7 @@ class Esm(Planner):
                                    self.config.neighbours)
         tree.gains[tree.root] = 0.0  # the vehicle is there: nothing left to gain
         tree.stamps[tree.root] = obs.time
-        added = self._expand(tree, obs)
+        added = self._grow_at_rest(tree, obs)
         self._refreshed = 0
         child, value = self.select(tree, obs.map, obs.time)
         info: dict[str, float | int | str] = {
@@ -196,11 +196,21 @@ class Esm(Planner):
                                                   gains.gap_fill)
         return self._gain_state
 
+    def _grow_at_rest(self, tree: SegmentTree, obs: Observation) -> int:
+        """Grow the tree in a call made at rest; returns how many segments were added. Here
+        every such call grows it (`_expand`)."""
+        return self._expand(tree, obs)
+
+    def _sampling_centre(self, tree: SegmentTree) -> FloatArray:
+        """(3,) the point the semilocal samples are drawn round: the root."""
+        centre: FloatArray = tree.positions[tree.root]
+        return centre
+
     def _expand(self, tree: SegmentTree, obs: Observation) -> int:
         """Grow the tree by up to `new_per_call` segments; returns how many were added."""
         cfg, ctx, view = self.config, self.context, obs.map
         rng = ctx.rng
-        root = tree.positions[tree.root]
+        root = self._sampling_centre(tree)
         d_root = np.linalg.norm(tree.positions - root, axis=1)
         local_missing = cfg.local_count - (int(np.count_nonzero(d_root <= cfg.local_radius_m))
                                            - 1)

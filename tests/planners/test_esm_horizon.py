@@ -36,8 +36,8 @@ def _context(indoor: bool = True) -> PlannerContext:
 
 
 def test_registered_beside_v1_with_their_gains() -> None:
-    assert spec("esm-ipp").id == "esm-ipp-v3"
-    assert spec("esm-recon").id == "esm-recon-v3"
+    assert spec("esm-ipp-v3").id == "esm-ipp-v3"
+    assert spec("esm-recon-v3").id == "esm-recon-v3"
     for version in (2, 3):
         assert make(f"esm-ipp-v{version}").config.gain == "volumetric"  # type: ignore[attr-defined]
         assert make(f"esm-recon-v{version}").config.gain == \

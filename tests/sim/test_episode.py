@@ -166,6 +166,25 @@ def test_keeping_with_a_zero_period_does_not_stall_the_clock() -> None:
     assert np.all(np.diff(times) > 0.1)  # asked again only after the flight's own period
 
 
+def test_keeping_without_a_period_is_not_asked_again_that_flight() -> None:
+    """`Plan(keep=True)` with no `replan_s`: the flight goes on to its end unasked."""
+
+    class KeepOnce(_Shuttle):
+        def plan(self, obs: Observation) -> Plan:
+            if obs.last_outcome is PlanOutcome.FLYING:
+                self.calls.append((obs.time, obs.last_outcome.value, 0.0))
+                return Plan(keep=True)
+            return super().plan(obs)
+
+    planner = KeepOnce(replan_s=0.25)
+    result = _shuttle_run(planner, 16.0)
+    assert result.status is RunStatus.SUCCEEDED, result.reason
+    outcomes = [c[1] for c in planner.calls]
+    assert outcomes.count("flying") >= 2
+    # Each flight is asked once in flight, then the next call is at its end.
+    assert all(a != "flying" or b != "flying" for a, b in zip(outcomes, outcomes[1:]))
+
+
 class _Dash:
     """One straight flight of 3-4 m from the start, yawed along it; then finishes. Records the
     calls as (time, last outcome, position, speed)."""
