@@ -117,8 +117,8 @@ class Esm(Planner):
                                    self.config.neighbours)
         tree.gains[tree.root] = 0.0  # the vehicle is there: nothing left to gain
         tree.stamps[tree.root] = obs.time
-        added = self._grow_at_rest(tree, obs)
         self._refreshed = 0
+        added = self._grow_at_rest(tree, obs)
         child, value = self.select(tree, obs.map, obs.time)
         info: dict[str, float | int | str] = {
             "nodes": int(tree.size), "added": added, "dropped": dropped,
