@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import numpy.typing as npt
 import pytest
@@ -182,7 +184,7 @@ def test_keeping_without_a_period_is_not_asked_again_that_flight() -> None:
     outcomes = [c[1] for c in planner.calls]
     assert outcomes.count("flying") >= 2
     # Each flight is asked once in flight, then the next call is at its end.
-    assert all(a != "flying" or b != "flying" for a, b in zip(outcomes, outcomes[1:]))
+    assert all(a != "flying" or b != "flying" for a, b in itertools.pairwise(outcomes))
 
 
 class _Dash:
