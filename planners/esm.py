@@ -118,8 +118,7 @@ class Esm(Planner):
         tree.gains[tree.root] = 0.0  # the vehicle is there: nothing left to gain
         tree.stamps[tree.root] = obs.time
         self._refreshed = 0
-        added = self._grow_at_rest(tree, obs)
-        child, value = self.select(tree, obs.map, obs.time)
+        added, child, value = self._grow_and_select(tree, obs)
         info: dict[str, float | int | str] = {
             "nodes": int(tree.size), "added": added, "dropped": dropped,
             "refreshed": self._refreshed, "value": value,
@@ -196,10 +195,12 @@ class Esm(Planner):
                                                   gains.gap_fill)
         return self._gain_state
 
-    def _grow_at_rest(self, tree: SegmentTree, obs: Observation) -> int:
-        """Grow the tree in a call made at rest; returns how many segments were added. Here
-        every such call grows it (`_expand`)."""
-        return self._expand(tree, obs)
+    def _grow_and_select(self, tree: SegmentTree, obs: Observation) -> tuple[int, int, float]:
+        """In a call made at rest: grow the tree (here always, `_expand`), then choose the
+        root's child to fly (`select`). Returns (segments added, child, value)."""
+        added = self._expand(tree, obs)
+        child, value = self.select(tree, obs.map, obs.time)
+        return added, child, value
 
     def _sampling_centre(self, tree: SegmentTree) -> FloatArray:
         """(3,) the point the semilocal samples are drawn round: the root."""

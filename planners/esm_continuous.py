@@ -25,7 +25,6 @@ from __future__ import annotations
 import dataclasses
 from typing import Literal
 
-import numpy as np
 from pydantic import Field
 
 from planners.api import Observation, Plan, PlanOutcome
@@ -74,14 +73,14 @@ class EsmContinuous(EsmHorizonPlanner):
         added = self._expand(tree, obs)
         return Plan(keep=True, info={"mode": "grow", "added": added, "nodes": int(tree.size)})
 
-    def _grow_at_rest(self, tree: SegmentTree, obs: Observation) -> int:
+    def _grow_and_select(self, tree: SegmentTree, obs: Observation) -> tuple[int, int, float]:
         """At a segment's end the original selects at once; the tree grows here only when no
         branch is worth flying."""
         if tree.size >= 2:
             child, value = self.select(tree, obs.map, obs.time)
             if child >= 0 and value > self.config.min_value:
-                return 0
-        return self._expand(tree, obs)
+                return 0, child, value
+        return super()._grow_and_select(tree, obs)
 
     def _sampling_centre(self, tree: SegmentTree) -> FloatArray:
         """In flight, the node being flown to (the original's root has moved there when the
@@ -90,7 +89,7 @@ class EsmContinuous(EsmHorizonPlanner):
         if 0 <= pending < tree.size:
             centre: FloatArray = tree.positions[pending]
             return centre
-        return np.asarray(tree.positions[tree.root], dtype=np.float64)
+        return super()._sampling_centre(tree)
 
 
 class EsmReconContinuous(EsmContinuous):

@@ -9,30 +9,10 @@ import pytest
 from planners.esm_continuous import EsmContinuous
 from planners.esm_horizon import EsmHorizonPlanner
 from planners.registry import make, spec
-from sim.camera import CameraConfig
 from sim.geometry import Pose
-from sim.interface import Observation, PlannerContext, PlanOutcome
+from sim.interface import Observation, PlanOutcome
 from sim.map_view import MapView
-from sim.occupancy import VoxelState
-from sim.vehicle import VehicleLimits
-from tests.planners.conftest import stack_from_state
-
-VOXEL = 0.1
-SHAPE = (60, 40, 25)
-
-
-def _context() -> PlannerContext:
-    return PlannerContext(area="handmade", bounds_min=np.zeros(3),
-                          bounds_max=np.array(SHAPE) * VOXEL, start=Pose(np.ones(3), 0.0),
-                          limits=VehicleLimits(), safety_radius_m=0.45, camera=CameraConfig(),
-                          rng=np.random.default_rng(0))
-
-
-def _view() -> MapView:
-    """A known-free box in unknown space: every view near its faces has something to gain."""
-    state = np.zeros(SHAPE, dtype=np.uint8)
-    state[5:55, 5:35, 3:22] = VoxelState.FREE
-    return stack_from_state(state, VOXEL, 0.45).view()
+from tests.planners.conftest import handmade_context, open_box_view
 
 
 def _obs(view: MapView, here: np.ndarray, outcome: PlanOutcome, time: float) -> Observation:
@@ -51,11 +31,11 @@ def test_registered_as_v3_with_their_gains(name: str) -> None:
 
 
 def test_flight_grows_the_tree_and_the_segment_end_only_selects() -> None:
-    view = _view()
+    view = open_box_view()
     # Three segments per batch, so that the small box is not filled by the first call.
     planner = make("esm-ipp-v4", {"new_per_call": 3})
     assert isinstance(planner, EsmContinuous)
-    planner.reset(_context())
+    planner.reset(handmade_context())
     here = np.array([2.0, 1.5, 1.25])
     first = planner.plan(_obs(view, here, PlanOutcome.NONE, 0.0))
     # The first call has a lone root: it grows, as v3, and asks to be called once the flight
@@ -84,10 +64,10 @@ def test_v3_grows_at_every_segment_end_where_v4_does_not() -> None:
     """The same first call and flight for both; at the segment's end v3 grows the tree."""
     added = {}
     for name in ("esm-ipp-v3", "esm-ipp-v4"):
-        view = _view()
+        view = open_box_view()
         planner = make(name, {"new_per_call": 3})
         assert isinstance(planner, EsmHorizonPlanner)
-        planner.reset(_context())
+        planner.reset(handmade_context())
         here = np.array([2.0, 1.5, 1.25])
         first = planner.plan(_obs(view, here, PlanOutcome.NONE, 0.0))
         assert first.replan_s == (None if name.endswith("v3") else 0.1)
@@ -98,6 +78,6 @@ def test_v3_grows_at_every_segment_end_where_v4_does_not() -> None:
 
 def test_a_call_in_flight_before_any_tree_keeps_flying() -> None:
     planner = make("esm-recon-v4")
-    planner.reset(_context())
-    plan = planner.plan(_obs(_view(), np.array([2.0, 1.5, 1.25]), PlanOutcome.FLYING, 0.0))
+    planner.reset(handmade_context())
+    plan = planner.plan(_obs(open_box_view(), np.array([2.0, 1.5, 1.25]), PlanOutcome.FLYING, 0.0))
     assert plan.keep and plan.replan_s is None and plan.info["added"] == 0

@@ -14,25 +14,15 @@ from planners.esm_horizon import EsmHorizon, NodeIndex
 from planners.esm_horizon_config import EsmHorizonConfig, EsmHorizonV3Config, EsmLargeArea
 from planners.registry import make, spec
 from planners.segment_tree import FlightTime, SegmentTree
-from sim.camera import CameraConfig
 from sim.geometry import Pose
 from sim.interface import Observation, PlannerContext, PlanOutcome
 from sim.map_view import MapView
 from sim.occupancy import VoxelState
-from sim.vehicle import VehicleLimits
-from tests.planners.conftest import stack_from_state
+from tests.planners.conftest import handmade_context, open_box_view, stack_from_state
 
 FloatArray = npt.NDArray[np.float64]
 FLIGHT = FlightTime(v_max=1.5, a_max=2.5, yaw_rate_max=1.0, yaw_acc_max=2.0)
-VOXEL = 0.1
-SHAPE = (60, 40, 25)
 
-
-def _context(indoor: bool = True) -> PlannerContext:
-    return PlannerContext(area="handmade", bounds_min=np.zeros(3),
-                          bounds_max=np.array(SHAPE) * VOXEL, start=Pose(np.ones(3), 0.0),
-                          limits=VehicleLimits(), safety_radius_m=0.45, camera=CameraConfig(),
-                          rng=np.random.default_rng(0), indoor=indoor)
 
 
 def test_registered_beside_v1_with_their_gains() -> None:
@@ -84,9 +74,9 @@ def test_v3_grows_the_large_area_tree_outdoors_at_any_voxel_size() -> None:
 def test_the_planner_reads_the_area_class_from_its_context(name: str, indoor: bool,
                                                             extension: float) -> None:
     planner = make(name)
-    planner.reset(_context(indoor))
+    planner.reset(handmade_context(indoor))
     here = np.array([2.0, 2.0, 1.25])
-    planner.plan(Observation(0.0, Pose(here, 0.0), np.zeros(3), _open_view(), PlanOutcome.NONE))
+    planner.plan(Observation(0.0, Pose(here, 0.0), np.zeros(3), open_box_view(), PlanOutcome.NONE))
     assert planner.config.extension_m == extension  # type: ignore[attr-defined]
 
 
@@ -151,17 +141,12 @@ def test_only_gains_within_the_update_range_are_recomputed() -> None:
     assert value == 0.0
 
 
-def _open_view() -> MapView:
-    state = np.zeros(SHAPE, dtype=np.uint8)
-    state[5:55, 5:35, 3:22] = VoxelState.FREE
-    return stack_from_state(state, VOXEL, 0.45).view()
-
 
 def test_no_new_segment_is_shorter_than_the_minimum() -> None:
-    view = _open_view()
+    view = open_box_view()
     planner = make("esm-ipp-v2", {"min_segment_m": 1.0})
     assert isinstance(planner, EsmHorizon)
-    planner.reset(_context())
+    planner.reset(handmade_context())
     start = np.array([2.0, 2.0, 1.25])
     assert planner._crop(view, start, start + np.array([0.8, 0.0, 0.0])) is None
     new = planner._crop(view, start, start + np.array([1.2, 0.0, 0.0]))
@@ -177,7 +162,7 @@ def test_a_flight_grows_a_tree_of_long_segments_on_a_coarse_map() -> None:
     view = stack_from_state(state, 0.2, 0.45).view()
     planner = make("esm-ipp-v2")
     assert isinstance(planner, EsmHorizon)
-    ctx = _context()
+    ctx = handmade_context()
     planner.reset(PlannerContext(**{**ctx.__dict__, "bounds_max": np.array(state.shape) * 0.2}))
     here = np.array([5.1, 4.1, 2.5])
     plan = planner.plan(Observation(0.0, Pose(here.copy(), 0.0), np.zeros(3), view,
