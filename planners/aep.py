@@ -9,6 +9,13 @@ When no cached node gains more than `zero_gain`, Classic's nearest frontier take
 Classic's own end condition ends the exploration (aep-v2 with classic-v1's settings, aep-v3 with
 classic-v2's); aep-v1 ends the exploration there.
 
+aep-v4 takes its global step as the public code the FLYBO authors ran does (`aeplanner`'s
+`getFrontiers`, `pigain`'s `pig.py`, `rrtplanner` and their `rpl_exploration_rotors` loop): the
+goals are the cached nodes whose cached gain exceeds `goal_gain_m3` (16 m³), cached gains are
+refreshed only near the vehicle (within `reevaluate_range_m`, every `reevaluate_period_s`, those
+above `reevaluate_above_m3`), the nearest goal by path is flown to, and with no goal left the
+vehicle hovers and the planner is asked again, as that loop asks again, rather than ending.
+
 Both versions are one class, `AepPlanner`, configured by `AepBaseConfig`; a version is a config
 model that sets the defaults of the settings it differs in (`fallback` only, so far), and neither
 is a subclass of the other. A later change of behaviour is a new setting whose default in
@@ -64,8 +71,21 @@ class AepBaseConfig(NbvpConfig):
     # Our choice: one cached node per half metre keeps the cache small; AEP caches every node.
     cache_spacing_m: float = Field(0.5, gt=0.0)
     # When the cache runs dry: Classic's nearest frontier with these settings (see
-    # `_fall_back`), or None, which ends the exploration there.
+    # `_fall_back`), or None, which ends the exploration there (or hovers, `hover_when_no_goal`).
     fallback: ClassicConfig | None
+    # The global step's rule. None (v1-v3, ours): every cached node is re-evaluated on the
+    # current map, best first, and the best gain * exp(-lambda * path length) above
+    # `zero_gain` is flown to. A number (v4): aeplanner's `getFrontiers` threshold: the goals
+    # are the nodes whose cached gain exceeds it, and the nearest by path is flown to.
+    goal_gain_m3: float | None = Field(None, ge=0.0)
+    # pig.py's re-evaluation of cached gains (only with `goal_gain_m3`): every 5 s, the nodes
+    # within 2 * aep/gain/r_max of the vehicle whose cached gain exceeds 2.
+    reevaluate_period_s: float = Field(5.0, gt=0.0)
+    reevaluate_range_m: float = Field(10.0, gt=0.0)
+    reevaluate_above_m3: float = Field(2.0, ge=0.0)
+    # rpl_exploration_rotors: with no goal, the loop asks the planner again (the `break`
+    # leaves its `switch`, not its loop): the vehicle hovers while it does, instead of ending.
+    hover_when_no_goal: bool = False
 
 
 class AepV1Config(AepBaseConfig):
@@ -88,6 +108,16 @@ class AepV3Config(AepBaseConfig):
     fallback: ClassicV2Config | None = ClassicV2Config()
 
 
+class AepV4Config(AepBaseConfig):
+    """aep-v4: the global step of the public code the FLYBO authors ran (module docstring);
+    no fallback: with no goal the vehicle hovers and asks again."""
+
+    fallback: ClassicConfig | None = None
+    # aeplanner.cpp, getFrontiers: srv.request.threshold = 16
+    goal_gain_m3: float | None = 16.0
+    hover_when_no_goal: bool = True
+
+
 class AepPlanner(Nbvp):
     """The code of every AEP version; `config_model` picks the version (see the module's
     docstring)."""
@@ -99,6 +129,7 @@ class AepPlanner(Nbvp):
         super().reset(ctx)
         self._cache = SpatialIndex(cell_m=max(self.config.cache_spacing_m, 0.5))
         self._fallback: ClassicPlanner | None = None
+        self._reevaluated_at = -math.inf
         if self.config.fallback is not None:
             self._fallback = ClassicPlanner(self.config.fallback)
             self._fallback.reset(ctx)
@@ -123,7 +154,10 @@ class AepPlanner(Nbvp):
                 self._cache.insert(tree.positions[n], gain, float(tree.yaws[n]))
 
     def no_local_gain(self, obs: Observation, outcome: TreeOutcome) -> Plan:
-        """Global step: fly to the cached node worth the most now."""
+        """Global step: fly to the cached node worth the most now (v1-v3), or to the nearest
+        goal (v4)."""
+        if self.config.goal_gain_m3 is not None:
+            return self._nearest_goal(obs, self.config.goal_gain_m3)
         cfg, view = self.config, obs.map
         here = np.asarray(obs.pose.position, dtype=np.float64)
         gains = self.gain_evaluator(view.voxel_size)
@@ -165,6 +199,67 @@ class AepPlanner(Nbvp):
         return Plan(best[1], info={"mode": "global", "candidates": len(ids),
                                    "evaluated": evaluated, "score": best[0]})
 
+    def _nearest_goal(self, obs: Observation, threshold: float) -> Plan:
+        """The published global step: refresh the cached gains near the vehicle when due,
+        then fly a shortest path to the nearest cached node whose cached gain exceeds
+        `threshold` (rrtplanner returns the least-cost path among the goals its tree
+        reaches). Far nodes keep the gain they were cached with, as in pig.py."""
+        cfg = self.config
+        here = np.asarray(obs.pose.position, dtype=np.float64)
+        if obs.time - self._reevaluated_at >= cfg.reevaluate_period_s:
+            self._reevaluate_near(obs, here)
+        ids = self._cache.ids()
+        goals = ids[self._cache.values(ids) > threshold] if len(ids) else ids
+        if len(goals) == 0:
+            return self._no_goal(obs, f"no cached node gains more than {threshold:g} m³")
+        dist = np.linalg.norm(self._cache.points(goals) - here, axis=1)
+        best: tuple[float, FloatArray] | None = None
+        for k in np.argsort(dist, kind="stable"):
+            if best is not None and dist[k] >= best[0]:
+                break  # a path is never shorter than the straight line
+            ident = int(goals[k])
+            point, yaw = self._cache.point(ident), self._cache.yaw(ident)
+            if dist[k] < cfg.cache_spacing_m:
+                waypoints: FloatArray | None = np.array([[*here, yaw]])  # turn on the spot
+            else:
+                waypoints = self._path_to(obs, point, yaw)
+            if waypoints is None:
+                # Ours: the original's tree would search until it reached a goal.
+                self._cache.remove(ident)
+                continue
+            length = float(np.sum(np.linalg.norm(np.diff(np.vstack([here, waypoints[:, :3]]),
+                                                         axis=0), axis=1)))
+            if best is None or length < best[0]:
+                best = (length, waypoints)
+        if best is None:
+            return self._no_goal(obs, f"no node gaining more than {threshold:g} m³ is reachable")
+        return Plan(best[1], info={"mode": "global", "goals": len(goals),
+                                   "path_m": best[0]})
+
+    def _reevaluate_near(self, obs: Observation, here: FloatArray) -> None:
+        """pig.py's timer: the gains of the cached nodes within `reevaluate_range_m` of the
+        vehicle along each axis whose cached gain exceeds `reevaluate_above_m3`, cast again on
+        the current map."""
+        cfg = self.config
+        self._reevaluated_at = obs.time
+        gains = self.gain_evaluator(obs.map.voxel_size)
+        ids = self._cache.ids()
+        if len(ids) == 0:
+            return
+        # pig.py queries its R-tree with a box, not a ball, round the vehicle.
+        near = np.all(np.abs(self._cache.points(ids) - here) <= cfg.reevaluate_range_m, axis=1)
+        due = ids[near & (self._cache.values(ids) > cfg.reevaluate_above_m3)]
+        for ident in due.tolist():
+            view_gain = gains.best_view(obs.map, self._cache.point(ident))
+            self._cache.update(ident, view_gain.gain, view_gain.yaw)
+
+    def _no_goal(self, obs: Observation, why: str) -> Plan:
+        """Nothing to fly to: hover and be asked again (v4), or fall back or end (v1-v3)."""
+        if not self.config.hover_when_no_goal:
+            return self._fall_back(obs, why)
+        here = np.asarray(obs.pose.position, dtype=np.float64)
+        return Plan(np.array([[*here, obs.pose.yaw]]), info={"mode": "hover", "reason": why})
+
     def _fall_back(self, obs: Observation, why: str) -> Plan:
         """Classic's nearest frontier, whose own end condition ends the exploration. The cache
         holds only views the local trees passed, and a tree's branch counts only when its
@@ -198,3 +293,10 @@ class AepV3(AepPlanner):
 
     config_model = AepV3Config
     config: AepV3Config
+
+
+class AepV4(AepPlanner):
+    """aep-v4."""
+
+    config_model = AepV4Config
+    config: AepV4Config

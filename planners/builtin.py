@@ -12,7 +12,7 @@ fingerprints to the lock file (`python -m flybo.versions --write` updates it).
 
 from __future__ import annotations
 
-from planners.aep import Aep, AepV1, AepV3
+from planners.aep import Aep, AepV1, AepV3, AepV4
 from planners.api import Planner
 from planners.classic import Classic, ClassicV2
 from planners.esm import EsmRecon, EsmV1
@@ -87,6 +87,13 @@ BUILTINS: tuple[tuple[str, int, type[Planner], str, str], ...] = (
         "aep", 3, AepV3,
         "As aep-v2, with classic-v2's nearest unvisited frontier when no cached node is "
         "worth visiting.",
+        _AEP_REFERENCE,
+    ),
+    (
+        "aep", 4, AepV4,
+        "NBVP-like local RRT* with best yaws; when the local gain runs out, the nearest "
+        "cached node whose cached gain exceeds 16 m³ (gains refreshed near the vehicle every "
+        "5 s), as the public code the FLYBO authors ran; with none, it hovers and plans again.",
         _AEP_REFERENCE,
     ),
     (

@@ -109,7 +109,7 @@ def test_changed_planner_must_be_registered_as_a_new_version(tree: dict[str, Any
     assert any(p.startswith("planner classic-v1 changed: register it as classic-v3")
                for p in problems), problems
     # The next version is after the newest one registered, not after the changed one.
-    assert any(p.startswith("planner aep-v1 changed: register it as aep-v4")
+    assert any(p.startswith("planner aep-v1 changed: register it as aep-v5")
                for p in problems), problems
 
 

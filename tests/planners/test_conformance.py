@@ -208,7 +208,7 @@ def test_every_id_is_a_distinct_planner() -> None:
         seen[key] = s.id
 
 
-def test_aep_versions_differ_in_their_fallback_only() -> None:
+def test_aep_v1_and_v2_differ_in_their_fallback_only() -> None:
     v1, v2 = spec("aep-v1"), spec("aep-v2")
     assert v1.cls is not v2.cls
     assert not issubclass(v1.cls, v2.cls) and not issubclass(v2.cls, v1.cls)
@@ -216,3 +216,9 @@ def test_aep_versions_differ_in_their_fallback_only() -> None:
     assert first["fallback"] is None and second["fallback"] is not None
     assert {k: v for k, v in first.items() if k != "fallback"} == {
         k: v for k, v in second.items() if k != "fallback"}
+
+
+def test_aep_v4_differs_from_v1_in_its_global_step_only() -> None:
+    v1, v4 = spec("aep-v1").config_model().model_dump(), spec("aep-v4").config_model().model_dump()
+    step = {"goal_gain_m3", "hover_when_no_goal"}
+    assert {k for k in v1 if v1[k] != v4[k]} == step

@@ -226,7 +226,7 @@ def test_branch_values_accumulate_discounted_gains() -> None:
 
 
 def test_aep_goes_back_to_a_cached_view_when_the_local_gain_runs_out() -> None:
-    planner = make("aep")
+    planner = make("aep-v3")
     assert isinstance(planner, AepPlanner)
     planner.reset(_context())
     state = _corridor(4.5)
@@ -251,7 +251,7 @@ def test_aep_goes_back_to_a_cached_view_when_the_local_gain_runs_out() -> None:
 
 
 def test_aep_finishes_with_nothing_cached_and_nothing_to_see() -> None:
-    planner = make("aep")
+    planner = make("aep-v3")
     planner.reset(_context())
     plan = planner.plan(_observe(_corridor(8.0)))
     assert plan.done
@@ -262,7 +262,7 @@ def test_aep_flies_to_the_nearest_frontier_when_its_cache_runs_dry() -> None:
     reach): Classic's nearest frontier takes over instead of ending the exploration."""
     state = _corridor(8.0)
     state[72:75, 19:22, 11:14] = VoxelState.UNKNOWN  # 5.7 m ahead, out of the box's reach
-    planner = make("aep", {"sampling_radius_m": 0.3})
+    planner = make("aep-v3", {"sampling_radius_m": 0.3})
     assert isinstance(planner, AepPlanner)
     planner.reset(_context())
     obs = _observe(state)
@@ -273,11 +273,100 @@ def test_aep_flies_to_the_nearest_frontier_when_its_cache_runs_dry() -> None:
     assert plan.waypoints[-1, 0] > START[0] + 1.5
     assert math.cos(plan.waypoints[-1, 3]) > 0.5
     _assert_flyable(obs, plan.waypoints)
-    # aep-v1, kept for its stored results, ends there; "aep" is the newest version.
+    # aep-v1, kept for its stored results, ends there.
     first = make("aep-v1", {"sampling_radius_m": 0.3})
     first.reset(_context())
     assert first.plan(obs).done
-    assert spec("aep").id == "aep-v3"
+
+
+# -- aep-v4: the global step of the public code the FLYBO authors ran --------------------------
+
+
+def _aep_v4(**settings: object) -> AepPlanner:
+    planner = make("aep-v4", settings)
+    assert isinstance(planner, AepPlanner)
+    planner.reset(_context())
+    return planner
+
+
+def _long_corridor() -> np.ndarray:
+    """A closed corridor along +x, all known and free inside."""
+    state = np.full(SHAPE, VoxelState.FREE, dtype=np.uint8)
+    state[:, 0, :] = state[:, -1, :] = VoxelState.OCCUPIED
+    state[:, :, 0] = state[:, :, -1] = VoxelState.OCCUPIED
+    state[0, :, :] = state[-1, :, :] = VoxelState.OCCUPIED
+    return state
+
+
+def test_aep_v4_is_the_newest_aep_and_keeps_the_published_thresholds() -> None:
+    assert spec("aep").id == "aep-v4"
+    config = make("aep-v4").config
+    assert config.goal_gain_m3 == 16.0 and config.fallback is None
+    assert config.hover_when_no_goal
+    assert (config.reevaluate_period_s, config.reevaluate_range_m,
+            config.reevaluate_above_m3) == (5.0, 10.0, 2.0)
+    # The earlier versions keep their own global step.
+    for old in ("aep-v1", "aep-v2", "aep-v3"):
+        assert make(old).config.goal_gain_m3 is None
+
+
+def test_aep_v4_flies_to_the_nearest_goal_not_the_most_valuable() -> None:
+    """Two cached nodes above 16 m³: the nearer one by path is flown to, though the farther
+    one's cached gain is ten times larger (rrtplanner's least-cost goal)."""
+    planner = _aep_v4()
+    near, far = np.array([3.5, 2.0, 1.25]), np.array([6.5, 2.0, 1.25])
+    planner._cache.insert(near, 20.0, 0.0)
+    planner._cache.insert(far, 200.0, 0.0)
+    planner._reevaluated_at = 0.0  # not due: the cached gains stand
+    obs = _observe(_long_corridor(), outcome=PlanOutcome.REACHED)
+    plan = planner.plan(obs)
+    assert plan.info["mode"] == "global", plan.info
+    assert plan.info["goals"] == 2
+    np.testing.assert_allclose(plan.waypoints[-1, :3], near, atol=VOXEL)
+    _assert_flyable(obs, plan.waypoints)
+
+
+def test_aep_v4_refreshes_only_the_gains_near_the_vehicle_when_due() -> None:
+    """pig.py's timer: every 5 s, cached gains above 2 m³ within 10 m (per axis) are cast
+    again on the map; farther nodes keep the gain they were cached with."""
+    planner = _aep_v4(reevaluate_range_m=4.0)
+    near = planner._cache.insert(np.array([3.5, 2.0, 1.25]), 50.0, 0.0)
+    small = planner._cache.insert(np.array([4.5, 2.0, 1.25]), 1.5, 0.0)
+    far = planner._cache.insert(np.array([7.0, 2.0, 1.25]), 60.0, 0.0)
+    state = _long_corridor()
+    planner._reevaluated_at = -10.0
+    plan = planner.plan(Observation(3.0, Pose(START.copy(), 0.0), np.zeros(3),
+                                    stack_from_state(state, VOXEL, SAFETY).view(),
+                                    PlanOutcome.REACHED))
+    # Everything round the near node is known: its gain is gone; the small one was not cast
+    # again; the far one keeps its stale 60 m³ and is the goal.
+    assert planner._cache.value(near) == pytest.approx(0.0)
+    assert planner._cache.value(small) == pytest.approx(1.5)
+    assert planner._cache.value(far) == pytest.approx(60.0)
+    assert planner._reevaluated_at == 3.0
+    assert plan.info["mode"] == "global" and plan.info["goals"] == 1
+    np.testing.assert_allclose(plan.waypoints[-1, :3], [7.0, 2.0, 1.25], atol=VOXEL)
+    # Asked again within 5 s, nothing is cast again.
+    planner._cache.update(near, 50.0)
+    planner.plan(Observation(6.0, Pose(START.copy(), 0.0), np.zeros(3),
+                             stack_from_state(state, VOXEL, SAFETY).view(),
+                             PlanOutcome.REACHED))
+    assert planner._cache.value(near) == pytest.approx(50.0)
+
+
+def test_aep_v4_hovers_and_plans_again_when_no_goal_is_left() -> None:
+    """Nothing cached and nothing to see: the FLYBO authors' exploration loop asks the planner
+    again rather than ending, so the vehicle holds its pose; a goal cached meanwhile is flown
+    to at the next call."""
+    planner = _aep_v4()
+    obs = _observe(_long_corridor(), yaw=0.3, outcome=PlanOutcome.REACHED)
+    plan = planner.plan(obs)
+    assert not plan.done
+    assert plan.info["mode"] == "hover", plan.info
+    np.testing.assert_allclose(plan.waypoints, [[*START, 0.3]])
+    planner._cache.insert(np.array([5.5, 2.0, 1.25]), 30.0, 0.0)
+    planner._reevaluated_at = obs.time  # not due
+    assert planner.plan(obs).info["mode"] == "global"
 
 
 def _holed_wall() -> np.ndarray:
