@@ -16,9 +16,9 @@ refreshed only near the vehicle (within `reevaluate_range_m`, every `reevaluate_
 above `reevaluate_above_m3`), the nearest goal by path is flown to, and with no goal left the
 vehicle hovers and the planner is asked again, as that loop asks again, rather than ending.
 
-Both versions are one class, `AepPlanner`, configured by `AepBaseConfig`; a version is a config
-model that sets the defaults of the settings it differs in (`fallback` only, so far), and neither
-is a subclass of the other. A later change of behaviour is a new setting whose default in
+Every version is one class, `AepPlanner`, configured by `AepBaseConfig`; a version is a config
+model that sets the defaults of the settings it differs in (`fallback`, and v4's global step),
+and none is a subclass of another. A later change of behaviour is a new setting whose default in
 `AepV1Config` and `AepConfig` keeps what they do, and a new version that sets it.
 """
 
@@ -34,7 +34,7 @@ from pydantic import Field
 from planners.api import FloatArray, Observation, Plan, PlannerContext
 from planners.classic import ClassicConfig, ClassicPlanner, ClassicV2Config, frontier_fallback
 from planners.nbv_tree import TreeOutcome
-from planners.nbvp import Nbvp, NbvpConfig
+from planners.nbvp import NbvpConfig, NbvpPlanner
 from planners.spatial import SpatialIndex
 
 
@@ -118,7 +118,7 @@ class AepV4Config(AepBaseConfig):
     hover_when_no_goal: bool = True
 
 
-class AepPlanner(Nbvp):
+class AepPlanner(NbvpPlanner):
     """The code of every AEP version; `config_model` picks the version (see the module's
     docstring)."""
 

@@ -20,7 +20,7 @@ from planners.esm_continuous import EsmContinuous, EsmReconContinuous
 from planners.esm_horizon import EsmHorizon, EsmHorizonV3, EsmReconHorizon, EsmReconHorizonV3
 from planners.falcon import Falcon, FalconV2
 from planners.fuel import Fuel, FuelV2
-from planners.nbvp import Nbvp
+from planners.nbvp import Nbvp, NbvpV2
 from planners.rapid import Rapid, RapidV2
 from planners.splat import SplatPlanner, SplatPlannerV2
 
@@ -29,6 +29,8 @@ _RAPID_REFERENCE = ("T. Cieslewski, E. Kaufmann, D. Scaramuzza, Rapid exploratio
                     "multi-rotors: a frontier selection method for high speed flight, IROS 2017")
 _SPLAT_REFERENCE = ("A. Brunel, A. Bourki, C. Demonceaux, O. Strauss, SplatPlanner: efficient "
                     "autonomous exploration via permutohedral frontier filtering, ICRA 2021")
+_NBVP_REFERENCE = ("A. Bircher, M. Kamel, K. Alexis, H. Oleynikova, R. Siegwart, Receding horizon "
+                   "'next-best-view' planner for 3D exploration, ICRA 2016")
 _AEP_REFERENCE = ("M. Selin, M. Tiger, D. Duberg, F. Heintz, P. Jensfelt, Efficient "
                   "autonomous exploration planning of large-scale 3-D environments, RA-L 2019")
 _FUEL_REFERENCE = ("B. Zhou, Y. Zhang, X. Chen, S. Shen, FUEL: fast UAV exploration using "
@@ -68,8 +70,13 @@ BUILTINS: tuple[tuple[str, int, type[Planner], str, str], ...] = (
         "nbvp", 1, Nbvp,
         "Receding-horizon next-best-view: RRT with discounted view gains, first edge of "
         "the best branch.",
-        "A. Bircher, M. Kamel, K. Alexis, H. Oleynikova, R. Siegwart, Receding horizon "
-        "'next-best-view' planner for 3D exploration, ICRA 2016",
+        _NBVP_REFERENCE,
+    ),
+    (
+        "nbvp", 2, NbvpV2,
+        "Receding-horizon next-best-view as published: one RRT sampled in the whole area, "
+        "gains cast through the map as it is, first edge of the best branch.",
+        _NBVP_REFERENCE,
     ),
     (
         "aep", 1, AepV1,

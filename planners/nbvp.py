@@ -100,7 +100,24 @@ class NbvpConfig(PlannerConfig):
         )
 
 
-class Nbvp(Planner):
+class NbvpV2Config(NbvpConfig):
+    """nbvp-v2: the published method. nbvp-v1's three additions of ours are off, so the tree
+    samples the whole area and the gain is cast through the map as it is; whatever stall that
+    leaves is the method's own (`docs/planners/nbvp.md`)."""
+
+    # The public NBVP samples a ball around the vehicle as wide as the exploration box's
+    # diagonal (`nbvp/...` settings of the authors' maze.yaml): the whole area.
+    sampling_radius_m: float | None = Field(None, gt=0.0)
+    # No second, whole-area tree: there is one tree, sampled in the whole area.
+    wide_below_gain_m3: float | None = Field(None, gt=0.0)
+    # Rays pass gaps between occupied voxels, as in the original.
+    surface_gap_m: float | None = Field(None, gt=0.0)
+
+
+class NbvpPlanner(Planner):
+    """The code of every NBVP version (and of AEP's local step); `config_model` picks the
+    version."""
+
     config_model = NbvpConfig
     config: NbvpConfig
 
@@ -239,3 +256,18 @@ class Nbvp(Planner):
             [np.cos(yaw), np.sin(yaw), 0.0])
         waypoints: FloatArray = path_waypoints(view, path, obs.pose.position, look)
         return waypoints
+
+
+class Nbvp(NbvpPlanner):
+    """nbvp-v1: with three additions of ours (the 5 m sampling box with a whole-area tree
+    beside it, and surface gaps closed for the gain)."""
+
+    config_model = NbvpConfig
+    config: NbvpConfig
+
+
+class NbvpV2(NbvpPlanner):
+    """nbvp-v2: the published method."""
+
+    config_model = NbvpV2Config
+    config: NbvpV2Config

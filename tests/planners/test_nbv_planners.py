@@ -167,7 +167,7 @@ def test_nbvp_samples_the_whole_area_before_finishing() -> None:
     """Unknown beyond the gain range of every node of the box: the whole-area tree finds it."""
     state = _corridor(8.0)
     state[72:75, 19:22, 11:14] = VoxelState.UNKNOWN  # 5.7 m ahead, out of the box's reach
-    planner = make("nbvp", {"sampling_radius_m": 0.3, "max_nodes": 60})
+    planner = make("nbvp-v1", {"sampling_radius_m": 0.3, "max_nodes": 60})
     planner.reset(_context())
     obs = _observe(state)
     plan = planner.plan(obs)
@@ -184,13 +184,13 @@ def test_nbvp_grows_the_whole_area_tree_when_the_local_gain_is_tiny() -> None:
     state[50:79, 1:39, 1:24] = VoxelState.UNKNOWN  # 2.9 x 3.8 x 2.3 m from x = 5 m
     # Nodes within 1 m of the vehicle see 2 m: up to x = 4.5 m, short of the large region.
     config = {"sampling_radius_m": 1.0, "gain_range_m": 2.0}
-    local_only = make("nbvp", {**config, "wide_below_gain_m3": None})
+    local_only = make("nbvp-v1", {**config, "wide_below_gain_m3": None})
     local_only.reset(_context())
     obs = _observe(state)
     local = local_only.plan(obs)
     assert local.info["mode"] == "local"
     assert 0.0 < local.info["best_value"] < 0.1
-    planner = make("nbvp", config)
+    planner = make("nbvp-v1", config)
     planner.reset(_context())
     plan = planner.plan(obs)
     assert plan.info["mode"] == "wide", plan.info
@@ -369,6 +369,17 @@ def test_aep_v4_hovers_and_plans_again_when_no_goal_is_left() -> None:
     assert planner.plan(obs).info["mode"] == "global"
 
 
+def test_nbvp_v2_is_the_published_method() -> None:
+    """nbvp-v2 (what `nbvp` names) turns nbvp-v1's three additions off: one tree sampled in
+    the whole area, no second tree, gains cast through the map as it is."""
+    assert spec("nbvp").id == "nbvp-v2"
+    v1, v2 = make("nbvp-v1").config.model_dump(), make("nbvp-v2").config.model_dump()
+    assert {k for k in v1 if v1[k] != v2[k]} == {
+        "sampling_radius_m", "wide_below_gain_m3", "surface_gap_m"}
+    assert v2["sampling_radius_m"] is None and v2["wide_below_gain_m3"] is None
+    assert v2["surface_gap_m"] is None
+
+
 def _holed_wall() -> np.ndarray:
     """All known but a thick wall at y < 0.3 m whose unknown interior shows through a hole in
     its occupied layer, 1.8 m to the vehicle's right (as grazing rays leave walls on MAZE)."""
@@ -386,8 +397,12 @@ def test_nbvp_closes_holes_in_walls_before_counting_the_unknown_behind_them() ->
     state = _holed_wall()
     right = -math.pi / 2
     obs = _observe(state, yaw=right, outcome=PlanOutcome.REACHED)
-    planner = make("nbvp", {"max_nodes": 40})
+    planner = make("nbvp-v1", {"max_nodes": 40})
     assert isinstance(planner, Nbvp)
+    # nbvp-v2, the published method, casts through the hole and never finishes here.
+    published = make("nbvp-v2", {"max_nodes": 40})
+    published.reset(_context())
+    assert not published.plan(obs).done
     planner.reset(_context())
     gains = planner.gain_evaluator(VOXEL)
     assert gains.gain(obs.map, START, right) > 0.0
@@ -395,7 +410,7 @@ def test_nbvp_closes_holes_in_walls_before_counting_the_unknown_behind_them() ->
     closed = planner._gain_state
     assert closed is not None
     assert gains.at_yaw(gains.columns(obs.map, START, closed), right) == 0.0
-    original = make("nbvp", {"max_nodes": 40, "surface_gap_m": None})
+    original = make("nbvp-v1", {"max_nodes": 40, "surface_gap_m": None})
     original.reset(_context())
     plan = original.plan(obs)
     assert not plan.done and plan.info["best_value"] > 0.0
