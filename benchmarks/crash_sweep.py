@@ -4,7 +4,7 @@
         [--seeds 0] [--seconds S] [--jobs 1] [--recordings DIR]
     .venv/bin/python benchmarks/crash_sweep.py --rescore [--recordings DIR]
 
-By default the planners the leaderboard shows (each registered name's latest version) on the
+By default the planners the leaderboard shows (each registered name's default version) on the
 11 built-in areas, seed 0, the default preset, each area's plateau time. `--areas` also takes
 imported areas (`flybo areas import`) and `NAME@SEED`, a built-in area generated with another
 layout seed (as the held-out split's areas are). Each run is one episode in a process of its

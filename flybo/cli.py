@@ -258,7 +258,8 @@ def _list_planners() -> None:
     from planners.registry import planner_ids, spec  # the simulation stack: on use
 
     for planner_id in planner_ids():
-        print(f"{planner_id:<16} {spec(planner_id).description}")
+        s = spec(planner_id)
+        print(f"{planner_id:<16} {s.method or '-':<9} {s.description}")
 
 
 def _list_presets() -> None:

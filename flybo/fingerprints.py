@@ -155,7 +155,7 @@ def fingerprint_of_class(cls: type) -> str:
 
 
 def planner_fingerprint(planner_id: str) -> str:
-    """The fingerprint of registered planner `planner_id` (``name`` means its latest version).
+    """The fingerprint of registered planner `planner_id` (``name`` means its default version).
     """
     from planners.registry import spec
 

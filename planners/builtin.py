@@ -19,6 +19,7 @@ from planners.esm import EsmRecon, EsmV1
 from planners.esm_continuous import EsmContinuous, EsmReconContinuous
 from planners.esm_horizon import EsmHorizon, EsmHorizonV3, EsmReconHorizon, EsmReconHorizonV3
 from planners.falcon import Falcon, FalconV2
+from planners.fidelity import ORIGINAL, VARIANT
 from planners.fuel import Fuel, FuelV2
 from planners.nbvp import Nbvp, NbvpV2
 from planners.rapid import Rapid, RapidV2
@@ -41,143 +42,153 @@ _ESM_REFERENCE = ("L. Schmid, M. Pantic, R. Khanna, L. Ott, R. Siegwart, J. Niet
                   "sampling-based method for online informative path planning in unknown "
                   "environments, RA-L 2020")
 
-# (name, version, class, description, reference)
-BUILTINS: tuple[tuple[str, int, type[Planner], str, str], ...] = (
+# What each version is to its paper (`planners.fidelity`): "original" where it is the
+# method as published, differing only where the framework forces it or where the sources are
+# silent and a choice of ours had to be made; "variant" where it differs beyond that. The
+# variants: nbvp-v1 (a sampling box with a second whole-area tree, and surface gaps closed for
+# the gain: the public NBVP samples the whole box and casts through the map as it is); aep-v1
+# to aep-v3 (a global step of ours, where the code the FLYBO authors ran goes to the nearest
+# cached node above 16 m³ and asks again when none is left; v2 and v3 add Classic's frontier);
+# esm-*-v1 (no local horizon) and esm-*-v2, v3 (the tree grown only at rest, where the
+# original grows it in flight); fuel-v2 and falcon-v2 (dormant clusters sampled again, where
+# FUEL's code keeps them dormant). `docs/planners.md` lists them with their reasons.
+# (name, version, class, method, description, reference)
+BUILTINS: tuple[tuple[str, int, type[Planner], str, str, str], ...] = (
     (
-        "classic", 1, Classic,
+        "classic", 1, Classic, ORIGINAL,
         "Nearest frontier by path length (Yamauchi 1997), replanned at every waypoint.",
         _CLASSIC_REFERENCE,
     ),
     (
-        "classic", 2, ClassicV2,
+        "classic", 2, ClassicV2, ORIGINAL,
         "Nearest unvisited frontier by path length (Yamauchi 1997), replanned at every "
         "waypoint; the frontier looked at from a reached viewpoint counts as visited, and a "
         "vehicle the map closed in on escapes through known free space.",
         _CLASSIC_REFERENCE,
     ),
     (
-        "rapid", 1, Rapid,
+        "rapid", 1, Rapid, ORIGINAL,
         "Frontier in view needing the least change of velocity direction, flown at full "
         "speed and replanned in flight; nearest frontier otherwise.",
         _RAPID_REFERENCE,
     ),
     (
-        "rapid", 2, RapidV2,
+        "rapid", 2, RapidV2, ORIGINAL,
         "As rapid-v1, with classic-v2's nearest unvisited frontier as the fallback.",
         _RAPID_REFERENCE,
     ),
     (
-        "nbvp", 1, Nbvp,
+        "nbvp", 1, Nbvp, VARIANT,
         "Receding-horizon next-best-view: RRT with discounted view gains, first edge of "
         "the best branch.",
         _NBVP_REFERENCE,
     ),
     (
-        "nbvp", 2, NbvpV2,
+        "nbvp", 2, NbvpV2, ORIGINAL,
         "Receding-horizon next-best-view as published: one RRT sampled in the whole area, "
         "gains cast through the map as it is, first edge of the best branch.",
         _NBVP_REFERENCE,
     ),
     (
-        "aep", 1, AepV1,
+        "aep", 1, AepV1, VARIANT,
         "NBVP-like local RRT* with best yaws, plus cached high-gain nodes revisited "
         "when the local gain runs out; ends when no cached node is worth visiting.",
         _AEP_REFERENCE,
     ),
     (
-        "aep", 2, Aep,
+        "aep", 2, Aep, VARIANT,
         "NBVP-like local RRT* with best yaws, plus cached high-gain nodes revisited "
         "when the local gain runs out, and the nearest frontier when none is worth visiting.",
         _AEP_REFERENCE,
     ),
     (
-        "aep", 3, AepV3,
+        "aep", 3, AepV3, VARIANT,
         "As aep-v2, with classic-v2's nearest unvisited frontier when no cached node is "
         "worth visiting.",
         _AEP_REFERENCE,
     ),
     (
-        "aep", 4, AepV4,
+        "aep", 4, AepV4, ORIGINAL,
         "NBVP-like local RRT* with best yaws; when the local gain runs out, the nearest "
         "cached node whose cached gain exceeds 16 m³ (gains refreshed near the vehicle every "
         "5 s), as the public code the FLYBO authors ran; with none, it hovers and plans again.",
         _AEP_REFERENCE,
     ),
     (
-        "splatplanner", 1, SplatPlanner,
+        "splatplanner", 1, SplatPlanner, ORIGINAL,
         "Frontier voxels (position, normal) filtered on a permutohedral lattice; the "
         "viewpoint with the best filtered frontier density per flight time, reached by A*.",
         _SPLAT_REFERENCE,
     ),
     (
-        "splatplanner", 2, SplatPlannerV2,
+        "splatplanner", 2, SplatPlannerV2, ORIGINAL,
         "As splatplanner-v1, with classic-v2's nearest unvisited frontier as the fallback.",
         _SPLAT_REFERENCE,
     ),
     (
-        "esm-ipp", 1, EsmV1,
+        "esm-ipp", 1, EsmV1, VARIANT,
         "One persistent RRT* tree of segments grown at every call, valued by the "
         "unknown volume seen per second of flight along each branch; flies the best root child, "
         "re-roots there, recomputes stale gains lazily, back-tracks when nothing is worth flying.",
         _ESM_REFERENCE,
     ),
     (
-        "esm-recon", 1, EsmRecon,
+        "esm-recon", 1, EsmRecon, VARIANT,
         "ESM with a reconstruction gain: surface voxels seen by few fused frames or "
         "from few directions, plus unknown volume, per second of flight.",
         _ESM_REFERENCE,
     ),
     (
-        "esm-ipp", 2, EsmHorizon,
+        "esm-ipp", 2, EsmHorizon, VARIANT,
         "As esm-ipp-v1, with the original's local horizon: only views within the update range "
         "of the vehicle are re-evaluated, no segment is shorter than the minimum length, and "
         "areas mapped at 0.2 m grow the FLYBO authors' large-area tree (3 m segments).",
         _ESM_REFERENCE,
     ),
     (
-        "esm-recon", 2, EsmReconHorizon,
+        "esm-recon", 2, EsmReconHorizon, VARIANT,
         "As esm-recon-v1, with esm-ipp-v2's local horizon, minimum segment length and "
         "large-area tree.",
         _ESM_REFERENCE,
     ),
     (
-        "esm-ipp", 3, EsmHorizonV3,
+        "esm-ipp", 3, EsmHorizonV3, VARIANT,
         "As esm-ipp-v2, and outdoor areas (the area's class in the planner's context) grow "
         "the large-area tree too, as the FLYBO authors' PLATFORM A configuration does.",
         _ESM_REFERENCE,
     ),
     (
-        "esm-recon", 3, EsmReconHorizonV3,
+        "esm-recon", 3, EsmReconHorizonV3, VARIANT,
         "As esm-recon-v2, with esm-ipp-v3's large-area tree on outdoor areas.",
         _ESM_REFERENCE,
     ),
     (
-        "esm-ipp", 4, EsmContinuous,
+        "esm-ipp", 4, EsmContinuous, ORIGINAL,
         "As esm-ipp-v3, growing the tree while the vehicle flies (asked mid-leg once the "
         "flight is under way), as the original expands continuously; at a segment's end it "
         "only selects.",
         _ESM_REFERENCE,
     ),
     (
-        "esm-recon", 4, EsmReconContinuous,
+        "esm-recon", 4, EsmReconContinuous, ORIGINAL,
         "As esm-recon-v3, growing the tree while the vehicle flies, as esm-ipp-v4.",
         _ESM_REFERENCE,
     ),
     (
-        "fuel", 1, Fuel,
+        "fuel", 1, Fuel, ORIGINAL,
         "Frontier clusters with coverage-ranked viewpoints, a global ATSP tour over their "
         "best viewpoints by flight time, the next few clusters' viewpoints refined by a graph "
         "search; replanned in flight.",
         _FUEL_REFERENCE,
     ),
     (
-        "fuel", 2, FuelV2,
+        "fuel", 2, FuelV2, VARIANT,
         "As fuel-v1, but a frontier cluster without viewpoints samples them again at every "
         "call, where fuel-v1 keeps it dormant until its voxels change.",
         _FUEL_REFERENCE,
     ),
     (
-        "falcon", 1, Falcon,
+        "falcon", 1, Falcon, ORIGINAL,
         "FUEL's frontier clusters guided by a coverage path: the explored map cut into cells "
         "and their free and unknown zones with a connectivity graph, an ATSP tour over the "
         "zones, the nearby frontiers ordered by a sequential ordering problem that keeps the "
@@ -185,7 +196,7 @@ BUILTINS: tuple[tuple[str, int, type[Planner], str, str], ...] = (
         _FALCON_REFERENCE,
     ),
     (
-        "falcon", 2, FalconV2,
+        "falcon", 2, FalconV2, VARIANT,
         "As falcon-v1, but a frontier cluster without viewpoints samples them again at every "
         "call, as fuel-v2.",
         _FALCON_REFERENCE,

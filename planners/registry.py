@@ -34,6 +34,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from planners.api import Planner, PlannerConfig
+from planners.fidelity import METHODS, ORIGINAL, UNSTATED
 
 ENTRY_POINT_GROUP = "flybo.planners"
 BUILTIN = "builtin"
@@ -64,7 +65,8 @@ class PlannerSpec:
     """One registered planner version.
 
     `origin` is ``"builtin"``, ``"entry point <name> = <value>"`` or ``"direct"`` (a `register`
-    call outside both).
+    call outside both). `method` is one of `METHODS`: whether this version is the method of
+    `reference` as published (``"original"``), differs from it (``"variant"``), or does not say.
     """
 
     name: str
@@ -73,6 +75,7 @@ class PlannerSpec:
     description: str
     reference: str
     origin: str = DIRECT
+    method: str = UNSTATED
 
     @property
     def id(self) -> str:
@@ -121,9 +124,12 @@ _plugin_error: PlannerPluginError | None = None
 
 
 def register(
-    name: str, version: int, cls: type[Planner], *, description: str, reference: str = ""
+    name: str, version: int, cls: type[Planner], *, description: str, reference: str = "",
+    method: str = UNSTATED,
 ) -> PlannerSpec:
-    """Register `cls` as `name-v{version}`; registering the same id twice is an error."""
+    """Register `cls` as `name-v{version}`; registering the same id twice is an error.
+    `method`: ``"original"`` if it is the method of `reference` as published, ``"variant"``
+    if it differs from it, ``""`` to leave it unstated."""
     if isinstance(version, bool) or not isinstance(version, int) or version < 0:
         raise ValueError(f"invalid version {version!r} for planner {name!r}: an integer >= 0")
     match = _ID.match(name) if isinstance(name, str) else None
@@ -137,6 +143,9 @@ def register(
         )
     if not (isinstance(cls, type) and issubclass(cls, Planner)):
         raise TypeError(f"planner {format_id(name, version)}: {cls!r} is not a Planner subclass")
+    if method not in METHODS:
+        raise ValueError(f"planner {format_id(name, version)}: method {method!r} is none of "
+                         f"'original', 'variant' or '' (not stated)")
     with _LOCK:
         _ensure_builtins()
         existing = _REGISTRY.get(name, {}).get(version)
@@ -145,7 +154,7 @@ def register(
                 f"planner {existing.id} is already registered ({existing.origin}); "
                 "a changed planner needs a new version"
             )
-        spec_ = PlannerSpec(name, version, cls, description, reference, _origin)
+        spec_ = PlannerSpec(name, version, cls, description, reference, _origin, method)
         _REGISTRY.setdefault(name, {})[version] = spec_
         return spec_
 
@@ -172,8 +181,9 @@ def _ensure_builtins() -> None:
         before, previous = _snapshot(), _origin
         _origin = BUILTIN
         try:
-            for name, version, cls, description, reference in BUILTINS:
-                register(name, version, cls, description=description, reference=reference)
+            for name, version, cls, method, description, reference in BUILTINS:
+                register(name, version, cls, description=description, reference=reference,
+                         method=method)
         except BaseException:
             _restore(before)
             raise
@@ -249,8 +259,15 @@ def _ids() -> list[str]:
     return sorted(spec_.id for versions in _REGISTRY.values() for spec_ in versions.values())
 
 
+def default_version(versions: Mapping[int, PlannerSpec]) -> PlannerSpec:
+    """The version a bare name stands for: its newest original version (the method as
+    published), or its newest version when none is marked original."""
+    original = [v for v, s in versions.items() if s.method == ORIGINAL]
+    return versions[max(original) if original else max(versions)]
+
+
 def planner_names() -> list[str]:
-    """Every registered name (latest versions), sorted."""
+    """Every registered name, sorted (each stands for its `default_version`)."""
     _ensure_loaded()
     return sorted(name for name, versions in _REGISTRY.items() if versions)
 
@@ -274,8 +291,8 @@ def _unknown(text: str, message: str, candidates: list[str]) -> UnknownPlannerEr
 
 
 def spec(planner_id: str) -> PlannerSpec:
-    """The spec for ``name`` (latest version) or ``name-vN``; case and surrounding white space
-    are ignored.
+    """The spec for ``name`` (its `default_version`: the newest original version, else the
+    newest) or ``name-vN``; case and surrounding white space are ignored.
 
     Raises:
         UnknownPlannerError: naming the closest registered ids.
@@ -290,7 +307,7 @@ def spec(planner_id: str) -> PlannerSpec:
         candidates = _ids() + sorted(n for n, v in _REGISTRY.items() if v)
         raise _unknown(planner_id, f"unknown planner {planner_id!r}", candidates)
     if version is None:
-        return versions[max(versions)]
+        return default_version(versions)
     if version not in versions:
         ids = [versions[v].id for v in sorted(versions)]
         raise _unknown(

@@ -15,7 +15,7 @@ import json
 import lzma
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
@@ -41,6 +41,8 @@ class PlannerEntry(_Strict):
     builtin: bool
     description: str = ""
     reference: str = ""
+    # `planners.fidelity`; datasets exported before it was kept say nothing.
+    method: Literal["original", "variant", ""] = ""
     code_hash: str = Field(default="", max_length=64)
     config: dict[str, Any] = Field(default_factory=dict)
 

@@ -74,7 +74,7 @@ def export_dataset(session: Session, benchmark_version: str,
         planners[planner.key] = PlannerEntry(
             name=planner.name, version=planner.version, builtin=planner.builtin,
             description=planner.description, reference=planner.reference,
-            code_hash=planner.code_hash, config=planner.config)
+            method=planner.method, code_hash=planner.code_hash, config=planner.config)
         areas[area.name] = AreaEntry(name=area.name, builtin=area.builtin,
                                      content_hash=area.content_hash, plateau_s=area.plateau_s,
                                      voxel_size=area.voxel_size, stats=area.stats)
@@ -171,7 +171,7 @@ def _planner_row(session: Session, entry: PlannerEntry) -> PlannerRow:
     if row is None:
         row = PlannerRow(name=entry.name, version=entry.version, builtin=entry.builtin,
                          description=entry.description, reference=entry.reference,
-                         code_hash=entry.code_hash, config=entry.config)
+                         method=entry.method, code_hash=entry.code_hash, config=entry.config)
         session.add(row)
         session.flush()
     elif row.builtin != entry.builtin or (row.code_hash or "") != entry.code_hash:

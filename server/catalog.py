@@ -94,11 +94,12 @@ def sync_builtin_planners(session: Session) -> None:
                 with session.begin_nested():
                     session.add(PlannerRow(name=s.name, version=s.version, builtin=True,
                                            description=s.description, reference=s.reference,
+                                           method=s.method,
                                            config={"defaults": defaults, "schema": config}))
             except IntegrityError:
                 pass  # another process registered it just now
         else:
-            row.description, row.reference = s.description, s.reference
+            row.description, row.reference, row.method = s.description, s.reference, s.method
             row.config = {"defaults": defaults, "schema": config}
     session.flush()
 

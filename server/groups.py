@@ -18,6 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from planners.fidelity import ORIGINAL
 from server.catalog import CatalogError, ensure_area, find_planner
 from server.heldout import ensure_heldout_areas
 from server.jobs import JobError, cancel_job, check_quotas, create_job, job_status
@@ -114,16 +115,18 @@ def request_hash(body: GroupCreate) -> str:
 
 def _planner_names(session: Session, names: list[str]) -> list[str]:
     """`names` checked against the catalog (422 listing the known ones), or every built-in
-    planner's newest version for ['all']."""
+    planner's default (newest original) version for ['all']."""
     if names == [ALL]:
         rows = session.scalars(select(PlannerRow).where(PlannerRow.builtin.is_(True))
                                .order_by(PlannerRow.name, PlannerRow.version.desc()))
-        newest: dict[str, str] = {}
-        for row in rows:
-            newest.setdefault(row.name, row.key)
-        if not newest:
+        chosen: dict[str, PlannerRow] = {}
+        for row in rows:  # newest first: keep it unless an older one is the original method
+            held = chosen.get(row.name)
+            if held is None or (held.method != ORIGINAL and row.method == ORIGINAL):
+                chosen[row.name] = row
+        if not chosen:
             raise JobError(422, "no built-in planner is registered")
-        return list(newest.values())
+        return [row.key for row in chosen.values()]
     keys = []
     for name in names:
         try:

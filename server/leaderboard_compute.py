@@ -30,6 +30,7 @@ PUBLIC_SCOPE: Scope = (PUBLIC_SPLIT, None)
 class _Row:
     planner: str
     builtin: bool
+    method: str
     area: str
     result: RunResult
 
@@ -93,14 +94,15 @@ def compute_leaderboard(session: Session, preset: str, area: str | None = None, 
                         benchmark_version: str, scope: Scope = PUBLIC_SCOPE) -> Leaderboard:
     split, generation = scope
     query = succeeded_results(
-        PlannerRow.name, PlannerRow.version, PlannerRow.builtin, AreaRow.name, RunResult,
+        PlannerRow.name, PlannerRow.version, PlannerRow.builtin, PlannerRow.method,
+        AreaRow.name, RunResult,
         preset=preset, benchmark_version=benchmark_version).where(AreaRow.split == split)
     if split != PUBLIC_SPLIT:  # one generation only: never ranked with another's areas
         query = query.where(AreaRow.heldout_generation == generation)
     if area is not None:
         query = query.where(AreaRow.name == area)
-    rows = [_Row(f"{name}-v{version}", builtin, area_name, result)
-            for name, version, builtin, area_name, result in session.execute(query)]
+    rows = [_Row(f"{name}-v{version}", builtin, method, area_name, result)
+            for name, version, builtin, method, area_name, result in session.execute(query)]
     groups: dict[tuple[str, str], list[_Row]] = defaultdict(list)
     for row in rows:
         groups[(row.planner, row.area)].append(row)
@@ -125,7 +127,8 @@ def compute_leaderboard(session: Session, preset: str, area: str | None = None, 
             "planning_ms": [r.planning_ms_median for r in results],
             **{_METRIC + m.key: [metric_value(r, m.key) for r in results] for m in metrics}})
         entries.append(LeaderboardEntry(
-            planner=planner, builtin=members[0].builtin, area=area_name, runs=len(members),
+            planner=planner, builtin=members[0].builtin, method=members[0].method,
+            area=area_name, runs=len(members),
             coverage=spreads["coverage"], relative_coverage=spreads["relative_coverage"],
             fscore=spreads["fscore"], rmse_m=spreads["rmse_m"],
             path_length_m=spreads["path_length_m"], iterations=spreads["iterations"],
@@ -173,7 +176,7 @@ def _overall(entries: list[LeaderboardEntry],
         franks = [e.fscore_rank for e in mine if e.fscore_rank is not None]
         rmses = [e.rmse_m.mean for e in mine if e.rmse_m.mean is not None]
         overall.append(LeaderboardPlanner(
-            planner=planner, builtin=mine[0].builtin, areas=len(mine),
+            planner=planner, builtin=mine[0].builtin, method=mine[0].method, areas=len(mine),
             mean_coverage=sum(e.coverage.mean or 0.0 for e in mine) / len(mine),
             mean_relative_coverage=sum(e.relative_coverage.mean or 0.0 for e in mine) / len(mine),
             mean_fscore=sum(fscores) / len(fscores) if fscores else None,

@@ -161,6 +161,8 @@ class PlannerRow(Base):
     owner_id: Mapped[int | None] = mapped_column(ForeignKey("users.id"), nullable=True)
     description: Mapped[str] = mapped_column(Text, default="")
     reference: Mapped[str] = mapped_column(Text, default="")
+    # `planners.fidelity`: "original", "variant" or "" (not stated, as uploaded planners).
+    method: Mapped[str] = mapped_column(String(16), default="", server_default=text("''"))
     code_hash: Mapped[str] = mapped_column(String(64), default="")
     config: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     created_at: Mapped[datetime] = mapped_column(_TS, default=utcnow)

@@ -43,6 +43,9 @@ class PlannerOut(BaseModel):
     builtin: bool
     description: str
     reference: str
+    method: str = Field(default="", description="'original': the method as its paper "
+                        "published it (the rows to set beside the paper's); 'variant': it "
+                        "differs from it; '': not stated (uploaded planners)")
     config: dict[str, Any]
     owner: str | None
     code_hash: str | None = None
@@ -209,6 +212,9 @@ class MetricOut(BaseModel):
 class LeaderboardEntry(BaseModel):
     planner: str
     builtin: bool
+    method: str = Field(default="", description="'original': the method as its paper "
+                        "published it (the rows to set beside the paper's); 'variant': it "
+                        "differs from it; '': not stated (uploaded planners)")
     area: str
     runs: int
     coverage: Spread
@@ -234,6 +240,9 @@ class LeaderboardEntry(BaseModel):
 class LeaderboardPlanner(BaseModel):
     planner: str
     builtin: bool
+    method: str = Field(default="", description="'original': the method as its paper "
+                        "published it (the rows to set beside the paper's); 'variant': it "
+                        "differs from it; '': not stated (uploaded planners)")
     areas: int
     mean_coverage: float
     mean_relative_coverage: float

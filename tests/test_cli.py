@@ -180,6 +180,8 @@ def test_planners_lists_classic_v1(capsys: pytest.CaptureFixture[str]) -> None:
     listed = [line.split()[0] for line in out.strip().splitlines()]
     assert listed == planner_ids()
     assert "classic-v1" in listed
+    method = {line.split()[0]: line.split()[1] for line in out.strip().splitlines()}
+    assert (method["nbvp-v1"], method["nbvp-v2"]) == ("variant", "original")
 
 
 def test_presets_lists_every_preset(capsys: pytest.CaptureFixture[str]) -> None:

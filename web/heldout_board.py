@@ -33,7 +33,8 @@ def heldout_section(session: Session, preset: str, version: str) -> str:
         gap, mine = p.public_gap, p.public_mean_coverage
         rows.append(
             f"<tr data-planner='{esc(p.planner)}'>{td(str(p.rank), p.rank, 'num')}"
-            f"{td(planner_link(p.planner, p.builtin), p.planner)}{td(str(p.areas), p.areas, 'num')}"
+            f"{td(planner_link(p.planner, p.builtin, p.method), p.planner)}"
+            f"{td(str(p.areas), p.areas, 'num')}"
             f"{td(num(p.mean_coverage, 1, 100), p.mean_coverage, 'num')}"
             f"{td(num(mine, 1, 100) if mine is not None else DASH, mine, 'num')}"
             f"{td(num(gap, 1, 100) if gap is not None else DASH, gap, 'num gap')}</tr>")

@@ -125,8 +125,20 @@ def table(caption: str, headers: list[tuple[str, str]], rows: list[str], *,
             f"<tbody>{body}</tbody></table></div>")
 
 
-def planner_link(key: str, builtin: bool) -> str:
+_METHOD_BADGES = {
+    "original": "<span class='badge badge-original' title='the method as its paper published "
+                "it: the row to set beside the paper&#39;s'>original method</span>",
+    "variant": "<span class='badge badge-variant' title='differs from the method its paper "
+               "published (docs/planners.md)'>variant</span>",
+}
+
+
+def planner_link(key: str, builtin: bool, method: str = "") -> str:
+    """A planner's name linking to its page, with a badge for a built-in planner and one for
+    what it is to its paper's method (`planners.fidelity`), where stated."""
     badge = " <span class='badge' title='built-in planner'>baseline</span>" if builtin else ""
+    if method in _METHOD_BADGES:
+        badge += " " + _METHOD_BADGES[method]
     return f"<a href='/planners/{esc(key)}'>{esc(key)}</a>{badge}"
 
 

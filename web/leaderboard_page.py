@@ -107,7 +107,8 @@ def _coverage_table(board: Leaderboard) -> str:
                 for m in extra]
     rows = []
     for p in board.overall:
-        cells = [td(str(p.rank), p.rank, "num"), td(planner_link(p.planner, p.builtin), p.planner)]
+        cells = [td(str(p.rank), p.rank, "num"),
+                 td(planner_link(p.planner, p.builtin, p.method), p.planner)]
         for area in board.areas:
             e = entries.get((p.planner, area))
             cells.append(spread_td(e.coverage, 1, 100) if e else td(DASH))
@@ -152,7 +153,7 @@ def _surface_table(board: Leaderboard) -> str:
     by_fscore = sorted(board.overall, key=lambda p: (p.mean_fscore_rank is None,
                                                      p.mean_fscore_rank or 0.0))
     for p in by_fscore:
-        cells = [td(planner_link(p.planner, p.builtin), p.planner)]
+        cells = [td(planner_link(p.planner, p.builtin, p.method), p.planner)]
         for area in board.areas:
             e = entries.get((p.planner, area))
             cells += [spread_td(e.fscore, 1, 100), spread_td(e.rmse_m, 2, 100)] if e else [
@@ -180,7 +181,8 @@ def _area_table(board: Leaderboard, area: str | None) -> str:
     headers += [_metric_header(m, f"{m.label} over the runs") for m in extra]
     rows = [
         "<tr>" + "".join([
-            td(planner_link(e.planner, e.builtin), e.planner), td(str(e.runs), e.runs, "num"),
+            td(planner_link(e.planner, e.builtin, e.method), e.planner),
+            td(str(e.runs), e.runs, "num"),
             spread_td(e.iterations, 0), spread_td(e.planning_ms, 1),
             spread_td(e.path_length_m, 1), spread_td(e.coverage, 1, 100),
             spread_td(e.fscore, 1, 100), td(str(e.collisions), e.collisions, "num"),

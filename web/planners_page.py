@@ -37,7 +37,7 @@ MAX_RUNS = 200
 def planners_page(session: SessionDep) -> HTMLResponse:
     found = session.execute(select(PlannerRow, User.name).outerjoin(
         User, PlannerRow.owner_id == User.id).order_by(PlannerRow.name, PlannerRow.version))
-    rows = [f"<tr>{td(planner_link(r.key, r.builtin), r.key)}{td(esc(owner or DASH))}"
+    rows = [f"<tr>{td(planner_link(r.key, r.builtin, r.method), r.key)}{td(esc(owner or DASH))}"
             f"{td(esc(r.description))}{td(esc(r.reference))}</tr>" for r, owner in found]
     body = ("<h1>Planners</h1>"
             + table("Registered planners and their versions",

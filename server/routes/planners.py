@@ -42,7 +42,8 @@ def planner_out(row: PlannerRow, owner: str | None, *, for_owner: bool = False) 
     if "check" in config and not for_owner:
         config["check"] = {k: v for k, v in config["check"].items() if k != "output"}
     return PlannerOut(name=row.name, version=row.version, id=row.key, builtin=row.builtin,
-                      description=row.description, reference=row.reference, config=config,
+                      description=row.description, reference=row.reference,
+                      method=row.method, config=config,
                       owner=owner, code_hash=row.code_hash or None)
 
 

@@ -59,7 +59,8 @@ def _centres(voxels: np.ndarray) -> np.ndarray:
 def test_registered() -> None:
     planner = make("fuel-v1")
     assert isinstance(planner, Fuel)
-    assert isinstance(make("fuel"), FuelV2)  # the latest version
+    # The bare name is the newest original version; fuel-v2 is a variant.
+    assert type(make("fuel")) is Fuel and isinstance(make("fuel-v2"), FuelV2)
     config = make("fuel-v1", {"w_dir": 0.5}).config
     assert isinstance(config, FuelConfig)
     assert config.w_dir == 0.5

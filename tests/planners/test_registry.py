@@ -14,12 +14,14 @@ from planners.api import Observation, Plan, Planner
 from planners.classic import Classic, ClassicConfig
 from planners.registry import (
     PlannerConfigError,
+    PlannerSpec,
     UnknownPlannerError,
     make,
     planner_ids,
     planner_names,
     register,
     spec,
+    specs,
 )
 
 THROWAWAY = "zz_registry_test_throwaway"
@@ -283,13 +285,42 @@ def test_register_of_a_builtin_id_before_the_first_lookup_fails_at_once() -> Non
 def test_builtins_register_all_or_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
     import planners.builtin as builtin
 
-    broken = (*builtin.BUILTINS, ("classic", 1, _Throwaway, "duplicate", ""))
+    broken = (*builtin.BUILTINS, ("classic", 1, _Throwaway, "", "duplicate", ""))
     monkeypatch.setattr(builtin, "BUILTINS", broken)
     with pytest.raises(ValueError, match="already registered"):
         planner_ids()
     assert registry._REGISTRY == {}
     monkeypatch.setattr(builtin, "BUILTINS", broken[:-1])
     assert "classic-v1" in planner_ids()
+
+
+def test_every_builtin_says_what_it_is_to_its_paper() -> None:
+    """Each built-in version is marked original or variant, every name has an original
+    version, and a bare name stands for its newest original version."""
+    by_name: dict[str, list[PlannerSpec]] = {}
+    for s in specs():
+        if s.builtin:
+            assert s.method in ("original", "variant"), s.id
+            by_name.setdefault(s.name, []).append(s)
+    for name, versions in by_name.items():
+        originals = [s.version for s in versions if s.method == "original"]
+        assert originals, f"{name} has no original version"
+        assert spec(name).version == max(originals)
+    # Where the newest version is a variant, the bare name keeps to the original.
+    assert spec("fuel-v2").method == "variant" and spec("fuel").id == "fuel-v1"
+
+
+@pytest.mark.usefixtures("fresh_registry")
+def test_a_bare_name_without_an_original_is_its_newest_version() -> None:
+    register("mine", 1, _Throwaway, description="first", method="original")
+    register("mine", 2, _Throwaway, description="second", method="variant")
+    register("theirs", 1, _Throwaway, description="unstated")
+    register("theirs", 2, _Throwaway, description="unstated too")
+    assert spec("mine").id == "mine-v1"
+    assert spec("theirs").id == "theirs-v2"
+    assert spec("theirs-v1").method == ""
+    with pytest.raises(ValueError, match="method 'faithful' is none of"):
+        register("mine", 3, _Throwaway, description="third", method="faithful")
 
 
 # -- entry points ----------------------------------------------------------------------------------

@@ -44,6 +44,10 @@ def test_areas_and_planners(client: TestClient) -> None:
     assert "classic-v1" in [p["id"] for p in planners]
     classic = client.get("/api/v1/planners/classic").json()
     assert classic["builtin"] and "defaults" in classic["config"]
+    # What each built-in version is to its paper; a bare name is its newest original version.
+    methods = {p["id"]: p["method"] for p in planners}
+    assert (methods["nbvp-v1"], methods["nbvp-v2"]) == ("variant", "original")
+    assert client.get("/api/v1/planners/fuel").json()["id"] == "fuel-v1"
     unknown = client.get("/api/v1/planners/teleport")
     assert unknown.status_code == 404 and "classic-v1" in unknown.json()["detail"]
 

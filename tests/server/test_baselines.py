@@ -53,7 +53,8 @@ def source(tmp_path: Path) -> Iterator[sessionmaker[Session]]:
         create_token(s, "alice", "secret")
         alice = s.scalars(select(User).where(User.name == "alice")).one()
         maze, hall = add_area(s, "maze", "MAZE"), add_area(s, "hall", "HALL")
-        alpha, beta = add_planner(s, "alpha"), add_planner(s, "beta")
+        alpha = add_planner(s, "alpha", method="original")
+        beta = add_planner(s, "beta", method="variant")
         mine = add_planner(s, "mine", builtin=False, owner=alice)
         job = add_job(s, alice, alpha)
         for seed, cov in enumerate((0.8, 0.6, 0.7)):
@@ -127,6 +128,8 @@ def test_import_gives_the_same_leaderboard_as_reference_results(
         theirs = compute_leaderboard(s, "default", benchmark_version=VERSION).entries
     assert {(e.planner, e.area): e.coverage for e in theirs} == {
         (e.planner, e.area): e.coverage for e in mine}
+    # What each planner is to its paper travels with it, and the board shows it.
+    assert {e.planner: e.method for e in theirs} == {"alpha-v1": "original", "beta-v1": "variant"}
     assert _board(sessions, "exact") == _board(source, "exact")
     with sessions() as s:
         jobs = s.scalars(select(Job)).all()

@@ -66,8 +66,10 @@ def test_all_and_time_scale(client: TestClient, tokens: Any,
     assert response.status_code == 201, response.text
     group = response.json()
     planners = [p["planner"] for p in group["planners"]]
-    # "all" is the latest version of every registered name, one each.
+    # "all" is the default version of every registered name, one each: its newest original
+    # version (fuel-v2 is a variant of fuel-v1).
     assert "classic-v2" in planners and "classic-v1" not in planners
+    assert "fuel-v1" in planners and "fuel-v2" not in planners
     names = [p.rsplit("-v", 1)[0] for p in planners]
     assert len(names) == len(set(names)) >= 2
     # MAZE's plateau is 700 s: one run of 7 s per planner.

@@ -105,3 +105,30 @@ def test_areas_stored_before_the_split_are_public(database_url: str) -> None:
         assert session.scalar(select(func.count()).select_from(HeldoutGeneration)) == 0
         assert current_generation(session) == 1
     engine.dispose()
+
+
+def test_planners_stored_before_their_method_say_nothing(database_url: str) -> None:
+    """A database at 0005 keeps its planners through 0006 with the method not stated; the
+    start-up sync then marks the built-ins as the registry does."""
+    from planners.registry import spec
+    from server.catalog import sync_builtin_planners
+    from server.models import PlannerRow
+
+    engine = make_engine(database_url)
+    command.upgrade(alembic_config(database_url), "0005")
+    with engine.begin() as conn:
+        conn.execute(text(
+            "INSERT INTO planners (id, name, version, builtin, description, reference, "
+            "code_hash, config, created_at) VALUES (1, 'nbvp', 1, true, '', '', '', '{}', :now),"
+            " (2, 'mine', 1, false, '', '', '', '{}', :now)"), {"now": datetime.now(UTC)})
+    upgrade(engine)
+    with Session(engine) as session:
+        assert session.scalars(select(PlannerRow.method).order_by(PlannerRow.id)).all() == [
+            "", ""]
+        sync_builtin_planners(session)
+        session.commit()
+        method = {row.key: row.method for row in session.scalars(select(PlannerRow))}
+    assert method["nbvp-v1"] == spec("nbvp-v1").method == "variant"
+    assert method["nbvp-v2"] == "original"
+    assert method["mine-v1"] == ""  # an uploaded planner says nothing
+    engine.dispose()

@@ -59,9 +59,9 @@ def site(tmp_path: Path) -> Iterator[Site]:
         alice = s.query(User).filter_by(name="alice").one()
         maze = add_area(s, "maze", "MAZE")
         evil_area = add_area(s, "evil-area", HOSTILE)
-        alpha = add_planner(s, "alpha")
+        alpha = add_planner(s, "alpha", method="original")
         beta = add_planner(s, "beta", builtin=False, description=HOSTILE, owner=alice)
-        gamma = add_planner(s, "gamma")
+        gamma = add_planner(s, "gamma", method="variant")
         evil = add_planner(s, "<b>evil</b>", description=HOSTILE)
         job = add_job(s, alice, alpha)
         ids["alpha_job"] = job.id

@@ -53,10 +53,11 @@ def add_area(session: Session, name: str, title: str | None = None) -> AreaRow:
 
 
 def add_planner(session: Session, name: str, *, builtin: bool = True,
-                description: str = "a test planner", owner: User | None = None) -> PlannerRow:
+                description: str = "a test planner", owner: User | None = None,
+                method: str = "") -> PlannerRow:
     row = PlannerRow(name=name, version=1, builtin=builtin, description=description,
-                     reference="a reference", config={"defaults": {"step_m": 1.0}},
-                     owner_id=owner.id if owner else None)
+                     reference="a reference", method=method,
+                     config={"defaults": {"step_m": 1.0}}, owner_id=owner.id if owner else None)
     session.add(row)
     session.flush()
     return row

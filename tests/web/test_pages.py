@@ -69,8 +69,15 @@ def test_leaderboard_tables(site: Site) -> None:
     # Figure 6's error bars ride along: alpha is second in every resample.
     assert "data-coverage-rank-low='2' data-coverage-rank-high='2'" in alpha_row
     assert "baseline" in alpha_row
+    # What each planner is to its paper: alpha the original method, gamma a variant; beta,
+    # uploaded, says nothing.
+    assert ">original method</span>" in alpha_row and ">variant<" not in alpha_row
+    gamma_row = coverage[coverage.index("data-planner='gamma-v1'"):]
+    assert ">variant</span>" in gamma_row[:gamma_row.index("</tr>")]
     beta_row = coverage[coverage.index("data-planner='beta-v1'"):]
-    assert "baseline" not in beta_row[:beta_row.index("</tr>")]  # uploaded, not built in
+    beta_row = beta_row[:beta_row.index("</tr>")]
+    assert "baseline" not in beta_row  # uploaded, not built in
+    assert "original method" not in beta_row and ">variant<" not in beta_row
     # Pareto: beta leads coverage, alpha leads F-score; gamma is beaten by both.
     assert re.search(r"data-planner='alpha-v1'[^>]*data-pareto='1'", coverage)
     assert re.search(r"data-planner='gamma-v1'[^>]*data-pareto='0'", coverage)
