@@ -137,6 +137,11 @@ class AepPlanner(NbvpPlanner):
     def grow(self, obs: Observation, root: FloatArray) -> TreeOutcome:
         outcome = super().grow(obs, root)
         self._remember(outcome)
+        cfg = self.config
+        if cfg.goal_gain_m3 is not None and (
+                obs.time - self._reevaluated_at >= cfg.reevaluate_period_s):
+            # pig.py's timer runs beside the planner whatever it does: at every call once due.
+            self._reevaluate_near(obs, np.asarray(obs.pose.position, dtype=np.float64))
         return outcome
 
     def _remember(self, outcome: TreeOutcome) -> None:
@@ -200,14 +205,12 @@ class AepPlanner(NbvpPlanner):
                                    "evaluated": evaluated, "score": best[0]})
 
     def _nearest_goal(self, obs: Observation, threshold: float) -> Plan:
-        """The published global step: refresh the cached gains near the vehicle when due,
-        then fly a shortest path to the nearest cached node whose cached gain exceeds
-        `threshold` (rrtplanner returns the least-cost path among the goals its tree
-        reaches). Far nodes keep the gain they were cached with, as in pig.py."""
+        """The published global step: a shortest path to the nearest cached node whose cached
+        gain exceeds `threshold` (rrtplanner returns the least-cost path among the goals its
+        tree reaches). Cached gains are refreshed near the vehicle only (`grow`); far nodes
+        keep the gain they were cached with, as in pig.py."""
         cfg = self.config
         here = np.asarray(obs.pose.position, dtype=np.float64)
-        if obs.time - self._reevaluated_at >= cfg.reevaluate_period_s:
-            self._reevaluate_near(obs, here)
         ids = self._cache.ids()
         goals = ids[self._cache.values(ids) > threshold] if len(ids) else ids
         if len(goals) == 0:

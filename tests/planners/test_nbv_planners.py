@@ -354,6 +354,19 @@ def test_aep_v4_refreshes_only_the_gains_near_the_vehicle_when_due() -> None:
     assert planner._cache.value(near) == pytest.approx(50.0)
 
 
+def test_aep_v4_refreshes_the_gains_near_it_while_exploring_locally() -> None:
+    """pig.py's timer runs whatever the planner does: a call that finds local gain refreshes
+    the cache near the vehicle too, once due."""
+    planner = _aep_v4()
+    stale = planner._cache.insert(np.array([2.5, 2.0, 1.25]), 80.0, 0.0)
+    planner._reevaluated_at = -10.0
+    obs = _observe(_corridor(4.5))
+    plan = planner.plan(obs)
+    assert plan.info["mode"] == "local", plan.info
+    assert planner._reevaluated_at == obs.time
+    assert planner._cache.value(stale) < 80.0
+
+
 def test_aep_v4_hovers_and_plans_again_when_no_goal_is_left() -> None:
     """Nothing cached and nothing to see: the FLYBO authors' exploration loop asks the planner
     again rather than ending, so the vehicle holds its pose; a goal cached meanwhile is flown
