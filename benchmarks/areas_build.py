@@ -155,7 +155,7 @@ def _measure(seconds: float, area_list: str | None) -> None:
         area = load_area(name)
         truth = load_ground_truth(area)
         t0 = time.perf_counter()
-        result = run_episode(area, truth, make("classic"), config, 0, planner_name="classic-v1",
+        result = run_episode(area, truth, make("classic-v1"), config, 0, planner_name="classic-v1",
                              preset_name="exact", seconds=seconds).to_json()
         rows[name].update(flight_wall_s=time.perf_counter() - t0,
                           collisions=result["collisions"], coverage=result["coverage"],

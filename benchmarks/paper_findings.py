@@ -247,7 +247,7 @@ def report(summary: dict[str, Any]) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--planners", nargs="+", default=list(PLANNERS),
-                        help="ids or names (a name is its latest version), one per family")
+                        help="ids or names (a name is its default version), one per family")
     parser.add_argument("--areas", nargs="+", default=list(AREAS))
     parser.add_argument("--runs", type=int, default=1, help="seeds 0 .. runs-1")
     parser.add_argument("--seeds", type=int, nargs="+", default=None)

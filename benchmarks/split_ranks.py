@@ -8,8 +8,9 @@ areas: a built-in area's generator run with another layout seed, as the service 
 held-out areas (`server/heldout.py`). The public cells are the sweep's runs on the 11 built-in
 areas (seed 0 layouts) where the log has them, and otherwise the runs published in
 `--published` (the crash-sweep tables of `docs/RESULTS.md`): per planner family and area, the
-row of the newest version of the family that has one, the first such row when several tables
-hold it. Per planner the newest registered version is used on the held-out split.
+row of the family's default version (what its bare name stands for), else of its newest version
+that has one, the first such row when several tables hold it. Per planner the default version
+is used on the held-out split.
 
 Both splits are scored as the leaderboard scores a split: relative coverage (explored observable
 volume over the best planner's on the area) ranked per area, the ranks averaged over the areas;
@@ -65,8 +66,16 @@ def _version(planner_id: str) -> int:
 
 def public_runs(logged: list[dict[str, Any]], published: list[dict[str, Any]]
                 ) -> list[dict[str, Any]]:
-    """One run per paper family and built-in area: the log's newest version, else the
-    published one's (the first row of the newest version with a row)."""
+    """One run per paper family and built-in area: the log's run of the family's default
+    version (what its bare name stands for, as on the held-out side), else of its newest
+    version; failing both, the published one's (the first row of that version)."""
+    from planners.registry import spec
+
+    default = {spec(name).id for name in PLANNERS}
+
+    def preference(planner_id: str) -> tuple[bool, int]:
+        return planner_id in default, _version(planner_id)
+
     chosen: dict[tuple[str, str], dict[str, Any]] = {}
     for source in (logged, published):
         for run in source:
@@ -75,13 +84,13 @@ def public_runs(logged: list[dict[str, Any]], published: list[dict[str, Any]]
             key = (family(run["planner"]), run["area"])
             have = chosen.get(key)
             if have is None or (have.get("source") == run.get("source")
-                                and _version(run["planner"]) > _version(have["planner"])):
+                                and preference(run["planner"]) > preference(have["planner"])):
                 chosen[key] = run
     return list(chosen.values())
 
 
 def heldout_runs(logged: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """The log's runs on `FAMILY@SEED` areas by each paper family's newest registered version,
+    """The log's runs on `FAMILY@SEED` areas by each paper family's default version,
     with `area` the family and `layout` the whole name."""
     from planners.registry import spec
 
@@ -141,7 +150,7 @@ def main() -> None:
     heldout = heldout_runs(logged)
     if not heldout:
         raise SystemExit(f"{args.log}: no run of benchmark {version} on a FAMILY@SEED area "
-                         "by a paper planner's newest version")
+                         "by a paper planner's default version")
     public = public_runs(logged, published_runs(args.published)
                          if args.published.exists() else [])
     summary = compare(public, heldout)

@@ -83,8 +83,9 @@ class AepBaseConfig(NbvpConfig):
     reevaluate_period_s: float = Field(5.0, gt=0.0)
     reevaluate_range_m: float = Field(10.0, gt=0.0)
     reevaluate_above_m3: float = Field(2.0, ge=0.0)
-    # rpl_exploration_rotors: with no goal, the loop asks the planner again (the `break`
-    # leaves its `switch`, not its loop): the vehicle hovers while it does, instead of ending.
+    # rpl_exploration_rotors: with no goal, the loop asks the planner again at its 100 Hz rate
+    # (the `break` leaves its `switch`, not its loop): the vehicle hovers, instead of falling
+    # back or ending. With either global step.
     hover_when_no_goal: bool = False
 
 
@@ -168,7 +169,7 @@ class AepPlanner(NbvpPlanner):
         gains = self.gain_evaluator(view.voxel_size)
         ids = self._cache.ids()
         if len(ids) == 0:
-            return self._fall_back(obs, "no cached node left")
+            return self._no_goal(obs, "no cached node left")
         dist = np.linalg.norm(self._cache.points(ids) - here, axis=1)
         # Upper bounds of each node's worth: gains only shrink as the map fills in, and a
         # path is never shorter than the straight line.
@@ -200,7 +201,7 @@ class AepPlanner(NbvpPlanner):
             if best is None or score > best[0]:
                 best = (score, waypoints)
         if best is None:
-            return self._fall_back(obs, "no cached node gains more than the threshold")
+            return self._no_goal(obs, "no cached node gains more than the threshold")
         return Plan(best[1], info={"mode": "global", "candidates": len(ids),
                                    "evaluated": evaluated, "score": best[0]})
 
@@ -257,10 +258,14 @@ class AepPlanner(NbvpPlanner):
             self._cache.update(ident, view_gain.gain, view_gain.yaw)
 
     def _no_goal(self, obs: Observation, why: str) -> Plan:
-        """Nothing to fly to: hover and be asked again (v4), or fall back or end (v1-v3)."""
+        """Nothing to fly to: hold the pose and be asked again at the next step (v4: the plan
+        takes no time, so the next call comes one physics step, 10 ms, later, or after the
+        charged planning time), or fall back or end (v1-v3)."""
         if not self.config.hover_when_no_goal:
             return self._fall_back(obs, why)
         here = np.asarray(obs.pose.position, dtype=np.float64)
+        if self._previous and np.array_equal(self._previous[-1], here):
+            self._previous.pop()  # `plan` recorded it; hovering is no step to go back to
         return Plan(np.array([[*here, obs.pose.yaw]]), info={"mode": "hover", "reason": why})
 
     def _fall_back(self, obs: Observation, why: str) -> Plan:

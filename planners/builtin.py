@@ -42,16 +42,8 @@ _ESM_REFERENCE = ("L. Schmid, M. Pantic, R. Khanna, L. Ott, R. Siegwart, J. Niet
                   "sampling-based method for online informative path planning in unknown "
                   "environments, RA-L 2020")
 
-# What each version is to its paper (`planners.fidelity`): "original" where it is the
-# method as published, differing only where the framework forces it or where the sources are
-# silent and a choice of ours had to be made; "variant" where it differs beyond that. The
-# variants: nbvp-v1 (a sampling box with a second whole-area tree, and surface gaps closed for
-# the gain: the public NBVP samples the whole box and casts through the map as it is); aep-v1
-# to aep-v3 (a global step of ours, where the code the FLYBO authors ran goes to the nearest
-# cached node above 16 m³ and asks again when none is left; v2 and v3 add Classic's frontier);
-# esm-*-v1 (no local horizon) and esm-*-v2, v3 (the tree grown only at rest, where the
-# original grows it in flight); fuel-v2 and falcon-v2 (dormant clusters sampled again, where
-# FUEL's code keeps them dormant). `docs/planners.md` lists them with their reasons.
+# `method` (`planners.fidelity`): what each version is to its paper; the reason for every
+# variant is in `docs/planners.md`, "Original methods and variants".
 # (name, version, class, method, description, reference)
 BUILTINS: tuple[tuple[str, int, type[Planner], str, str, str], ...] = (
     (

@@ -11,11 +11,15 @@ vehicle goes back to the previous iteration's position, as the original does. Wh
 branch is worth less than `wide_below_gain_m3`, a tree sampled in the whole area is grown too,
 and the vehicle follows whichever best branch is worth more.
 
+That sampling box, the second tree and the closed surface gaps below are nbvp-v1's additions;
+nbvp-v2, the published method, turns all three off (`NbvpV2Config`): one tree sampled in the
+whole area, the gain cast through the map as it is.
+
 Gain counts the unknown voxels that rays reach through free and unknown space. Rays grazing a
 wall sweep some voxels of its occupied layer free, and through such holes the gain's rays reach
 the wall's interior, unknown for ever: views near walls keep a gain that no flight can reduce,
-and the vehicle roams the explored part of the area after it. So the gain is cast through a copy
-of the map whose occupied surfaces have gaps up to `surface_gap_m` closed.
+and the vehicle roams the explored part of the area after it. So nbvp-v1 casts the gain through a
+copy of the map whose occupied surfaces have gaps up to `surface_gap_m` closed.
 """
 
 from __future__ import annotations

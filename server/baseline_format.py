@@ -20,7 +20,9 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 FORMAT = "flybo-baselines"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+# Version 1 is version 2 without the planners' `method`; both are read.
+READABLE_VERSIONS = (1, 2)
 SUFFIX = ".json.xz"
 # A decompressed dataset larger than this is refused: the full suite is about 1/10 of it.
 MAX_DECOMPRESSED_BYTES = 1 << 30
@@ -41,7 +43,7 @@ class PlannerEntry(_Strict):
     builtin: bool
     description: str = ""
     reference: str = ""
-    # `planners.fidelity`; datasets exported before it was kept say nothing.
+    # `planners.fidelity`; format version 1 does not have it.
     method: Literal["original", "variant", ""] = ""
     code_hash: str = Field(default="", max_length=64)
     config: dict[str, Any] = Field(default_factory=dict)
@@ -216,9 +218,9 @@ def decode(data: bytes, *, benchmark_version: str | None = None) -> Dataset:
     if not isinstance(raw, dict) or raw.get("format") != FORMAT:
         raise DatasetError(f"not a baseline dataset (no \"format\": \"{FORMAT}\")")
     found = raw.get("format_version")
-    if found != FORMAT_VERSION:
+    if found not in READABLE_VERSIONS:
         raise DatasetError(f"dataset format version {found!r}; this flybo reads format "
-                           f"version {FORMAT_VERSION} only")
+                           f"versions {', '.join(map(str, READABLE_VERSIONS))} only")
     found_version = raw.get("benchmark_version")
     if benchmark_version is not None and found_version != benchmark_version:
         raise DatasetError(f"dataset of benchmark version {found_version!r}; this service "

@@ -105,7 +105,8 @@ def sync_builtin_planners(session: Session) -> None:
 
 
 def find_planner(session: Session, name: str) -> PlannerRow:
-    """`name` (newest version) or `name-vN` (that version), in any case. A built-in planner's
+    """`name` (its default version: the registry's newest original, for a built-in planner;
+    the newest, for an uploaded one) or `name-vN` (that version), in any case. A built-in planner's
     name is read by the planner registry, exactly as `flybo run --planner` reads it."""
     from planners.registry import UnknownPlannerError, spec  # the simulation stack, on use
 

@@ -18,7 +18,6 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from planners.fidelity import ORIGINAL
 from server.catalog import CatalogError, ensure_area, find_planner
 from server.heldout import ensure_heldout_areas
 from server.jobs import JobError, cancel_job, check_quotas, create_job, job_status
@@ -117,16 +116,12 @@ def _planner_names(session: Session, names: list[str]) -> list[str]:
     """`names` checked against the catalog (422 listing the known ones), or every built-in
     planner's default (newest original) version for ['all']."""
     if names == [ALL]:
-        rows = session.scalars(select(PlannerRow).where(PlannerRow.builtin.is_(True))
-                               .order_by(PlannerRow.name, PlannerRow.version.desc()))
-        chosen: dict[str, PlannerRow] = {}
-        for row in rows:  # newest first: keep it unless an older one is the original method
-            held = chosen.get(row.name)
-            if held is None or (held.method != ORIGINAL and row.method == ORIGINAL):
-                chosen[row.name] = row
-        if not chosen:
+        names = sorted(set(session.scalars(select(PlannerRow.name)
+                                           .where(PlannerRow.builtin.is_(True)))))
+        if not names:
             raise JobError(422, "no built-in planner is registered")
-        return [row.key for row in chosen.values()]
+        # Each name as a job names it: the registry's default version.
+        return [find_planner(session, name).key for name in names]
     keys = []
     for name in names:
         try:

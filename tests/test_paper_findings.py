@@ -100,7 +100,7 @@ def test_a_crash_sweep_log_is_compared_on_coverage_and_fscore_alone(tmp_path: Pa
     from planners.registry import spec
 
     here = benchmark_version()
-    latest = {name: spec(name).id for name in PLANNERS}
+    latest = {name: spec(name).id for name in PLANNERS}  # each family's default version
     rows = [_sweep_row(latest[p], area, 0.99 - 0.01 * i, 0.9 - 0.01 * i, here)
             for i, p in enumerate(PLANNERS) for area in ("maze", "warehouse")]
     older = [_sweep_row(latest["classic"], "maze", 1.0, 1.0, "2000.01-1"),

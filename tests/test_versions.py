@@ -213,7 +213,7 @@ def test_hashes_are_stable(tree: dict[str, Any]) -> None:
     assert component_hashes() == tree["components"]
     assert planner_fingerprints() == tree["planners"]
     assert planner_fingerprint("classic-v1") == tree["planners"]["classic-v1"]
-    assert planner_fingerprint(" Classic ") == tree["planners"]["classic-v2"]  # the latest
+    assert planner_fingerprint(" Classic ") == tree["planners"]["classic-v2"]  # the default
 
 
 def test_every_planner_id_has_its_own_fingerprint(tree: dict[str, Any]) -> None:

@@ -30,6 +30,11 @@ from web.html import (
 )
 
 router = APIRouter(include_in_schema=False)
+# What a planner is to its reference's method (`planners.fidelity`), as the planner page says it.
+_METHODS = {
+    "original": "original: the method as its paper published it",
+    "variant": "variant: it differs from the method its paper published (docs/planners.md)",
+}
 MAX_RUNS = 200
 
 
@@ -124,6 +129,7 @@ def planner_page(name: str, request: Request, session: SessionDep) -> HTMLRespon
         f"<p class='lead'>{esc(row.description) or 'No description.'}</p>"
         "<dl class='facts'>"
         f"<dt>Reference</dt><dd>{esc(row.reference) or DASH}</dd>"
+        f"<dt>Method</dt><dd>{_METHODS.get(row.method, 'not stated')}</dd>"
         f"<dt>Owner</dt><dd>{esc(owner.name) if owner else 'built in'}</dd>"
         f"<dt>Versions</dt><dd>{links}</dd>"
         f"<dt>Code hash</dt><dd><code>{esc(row.code_hash) or DASH}</code></dd></dl>"

@@ -27,7 +27,7 @@ def test_registered_as_v3_with_their_gains(name: str) -> None:
                                    "reconstruction")
     assert planner.config.first_growth_s == 0.1
     assert spec(name).id == name
-    assert spec(name.rsplit("-", 1)[0]).id == name  # the latest version
+    assert spec(name.rsplit("-", 1)[0]).id == name  # the default: the newest original version
 
 
 def test_flight_grows_the_tree_and_the_segment_end_only_selects() -> None:

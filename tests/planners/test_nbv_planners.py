@@ -354,6 +354,36 @@ def test_aep_v4_refreshes_only_the_gains_near_the_vehicle_when_due() -> None:
     assert planner._cache.value(near) == pytest.approx(50.0)
 
 
+def test_aep_v4_drops_an_unreachable_goal_and_flies_to_the_next() -> None:
+    """The nearer goal lies inside a solid block no path reaches: it leaves the cache and
+    the farther, reachable one is flown to; with none reachable, the vehicle hovers."""
+    state = _long_corridor()
+    state[38:45, 15:26, 8:18] = VoxelState.OCCUPIED  # a block round (4.15, 2.05, 1.25)
+    planner = _aep_v4()
+    walled = planner._cache.insert(np.array([4.15, 2.05, 1.25]), 40.0, 0.0)
+    open_ = planner._cache.insert(np.array([6.5, 2.0, 0.6]), 40.0, 0.0)
+    planner._reevaluated_at = 0.0  # not due
+    obs = _observe(state, outcome=PlanOutcome.REACHED)
+    plan = planner.plan(obs)
+    assert plan.info["mode"] == "global", plan.info
+    np.testing.assert_allclose(plan.waypoints[-1, :3], [6.5, 2.0, 0.6], atol=VOXEL)
+    assert walled not in planner._cache.ids() and open_ in planner._cache.ids()
+    planner._cache.remove(open_)
+    planner._cache.insert(np.array([4.15, 2.05, 1.25]), 40.0, 0.0)
+    plan = planner.plan(obs)
+    assert plan.info["mode"] == "hover"
+    assert plan.info["reason"] == "no node gaining more than 16 m³ is reachable"
+
+
+def test_aep_v4_turns_on_the_spot_to_a_goal_it_stands_on() -> None:
+    planner = _aep_v4()
+    planner._cache.insert(START + np.array([0.2, 0.0, 0.0]), 30.0, math.pi)
+    planner._reevaluated_at = 0.0  # not due
+    plan = planner.plan(_observe(_long_corridor(), outcome=PlanOutcome.REACHED))
+    assert plan.info["mode"] == "global", plan.info
+    np.testing.assert_allclose(plan.waypoints, [[*START, math.pi]])
+
+
 def test_aep_v4_refreshes_the_gains_near_it_while_exploring_locally() -> None:
     """pig.py's timer runs whatever the planner does: a call that finds local gain refreshes
     the cache near the vehicle too, once due."""

@@ -54,6 +54,7 @@ def test_planner_ids_contain_classic_v1() -> None:
 
 
 def test_spec_without_version_gives_the_latest(throwaway: str) -> None:
+    """With no version marked original, a bare name is the newest version."""
     register(throwaway, 3, _Throwaway, description="v3")
     register(throwaway, 2, _Throwaway, description="v2")
     assert spec(throwaway).version == 3
@@ -64,7 +65,7 @@ def test_spec_without_version_gives_the_latest(throwaway: str) -> None:
 def test_spec_of_classic() -> None:
     latest = spec("classic")
     assert latest.name == "classic"
-    assert latest.version == max(
+    assert latest.version == max(  # every classic version is the original method
         int(i.rsplit("-v", 1)[1]) for i in planner_ids() if i.startswith("classic-v")
     )
     v1 = spec("classic-v1")
@@ -318,6 +319,10 @@ def test_a_bare_name_without_an_original_is_its_newest_version() -> None:
     register("theirs", 2, _Throwaway, description="unstated too")
     assert spec("mine").id == "mine-v1"
     assert spec("theirs").id == "theirs-v2"
+    # Registered newer first, the variant still gives way to the original.
+    register("late", 2, _Throwaway, description="variant first", method="variant")
+    register("late", 1, _Throwaway, description="original after", method="original")
+    assert spec("late").id == "late-v1"
     assert spec("theirs-v1").method == ""
     with pytest.raises(ValueError, match="method 'faithful' is none of"):
         register("mine", 3, _Throwaway, description="third", method="faithful")

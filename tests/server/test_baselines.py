@@ -168,13 +168,28 @@ def _rewrite(path: Path, target: Path, change: dict[str, object]) -> Path:
 def test_other_versions_are_refused_naming_both(sessions: sessionmaker[Session],
                                                 dataset_file: Path, tmp_path: Path) -> None:
     before = _counts(sessions)
-    newer = _rewrite(dataset_file, tmp_path / "v2.json.xz", {"format_version": 2})
-    with pytest.raises(DatasetError, match=r"format version 2; this flybo reads format version 1"):
+    newer = _rewrite(dataset_file, tmp_path / "v3.json.xz", {"format_version": 3})
+    with pytest.raises(DatasetError,
+                       match=r"format version 3; this flybo reads format versions 1, 2 only"):
         load_file(sessions, newer, VERSION)
     with pytest.raises(DatasetError, match=re.escape(f"benchmark version '{VERSION}'; this "
                                                      "service is benchmark version '1999.01-1'")):
         load_file(sessions, dataset_file, "1999.01-1")
     assert _counts(sessions) == before
+
+
+def test_a_format_1_dataset_loads_with_the_method_unstated(
+        sessions: sessionmaker[Session], dataset_file: Path, tmp_path: Path) -> None:
+    raw = json.loads(lzma.decompress(dataset_file.read_bytes()))
+    for planner in raw["planners"]:
+        del planner["method"]
+    older = _rewrite(dataset_file, tmp_path / "v1.json.xz",
+                     {"format_version": 1, "planners": raw["planners"]})
+    done = load_file(sessions, older, VERSION)
+    assert done is not None and done.imported == 8
+    with sessions() as s:
+        entries = compute_leaderboard(s, "default", benchmark_version=VERSION).entries
+    assert {e.method for e in entries} == {""}
 
 
 def _bad_files(good: bytes, tmp: Path) -> dict[str, Path]:

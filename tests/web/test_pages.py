@@ -143,8 +143,13 @@ def test_job_planner_and_areas_pages(site: Site) -> None:
     planner = _html(site, "/planners/alpha")
     assert "&quot;step_m&quot;: 1.0" in planner  # the config, as JSON
     assert "alpha-v1" in planner and "id='runs-table'" in planner
+    assert "<dt>Method</dt><dd>original: the method as its paper published it</dd>" in planner
     beta = _html(site, "/planners/beta")
     assert "<dd>alice</dd>" in beta  # the owner
+    assert "<dt>Method</dt><dd>not stated</dd>" in beta
+    # The planners list marks each built-in by its method.
+    listing = _html(site, "/planners")
+    assert ">original method</span>" in listing and ">variant</span>" in listing
     areas = _html(site, "/areas")
     assert "src='/areas/maze/thumbnail.png'" in areas and "20 × 20 × 2.5" in areas
     jobs = _html(site, "/jobs")
