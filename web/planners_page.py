@@ -118,11 +118,11 @@ def planner_page(name: str, request: Request, session: SessionDep) -> HTMLRespon
                       f"{' aria-current=page' if v.id == row.id else ''}>{esc(v.key)}</a>"
                       for v in versions)
     current = current_version(request.app.state, session)
-    boards = sorted(set(session.execute(
+    boards = sorted({(preset, version) for preset, version in session.execute(
         select(Run.preset, RunResult.benchmark_version).join(Job, Run.job_id == Job.id)
         .join(RunResult, RunResult.run_id == Run.id)
         .where(Job.planner_id == row.id, Run.status == RunState.SUCCEEDED.value).distinct()
-    ).tuples()), key=lambda pv: (pv[0], pv[1] != current, pv[1]))
+    )}, key=lambda pv: (pv[0], pv[1] != current, pv[1]))
     config = json.dumps(row.config.get("defaults", row.config), indent=2, sort_keys=True)
     body = (
         f"<h1>{esc(row.key)}{' <span class=badge>baseline</span>' if row.builtin else ''}</h1>"

@@ -55,7 +55,7 @@ def _results(sessions: sessionmaker[Session], settings: Settings) -> tuple[str, 
         alice = s.query(User).filter_by(name="alice").one()
         public = add_area(s, "maze")
         (heldout,) = ensure_heldout_areas(s, settings.heldout_key, current_version(), ["maze"])
-        planner = add_planner(s, "probe-planner")
+        planner = add_planner(s, "probe-planner", method="original")
         add_run(s, add_job(s, alice, planner), public, 0, coverage=0.8, fscore=0.5,
                 volume=[0.0, 8.0], recall=[0.5])
         add_run(s, add_job(s, alice, planner), heldout, 0, coverage=0.5, fscore=0.4,
@@ -99,6 +99,7 @@ def test_the_front_page_shows_both_boards_and_the_gap(client: TestClient, tokens
     row = page.split("id='heldout-table'")[1].split("</tr>")[1]  # after the header row
     # Held-out 50.0 %, public 80.0 %: a gap of 30.0 percentage points.
     assert re.findall(r">([0-9.]+)</td>", row)[-3:] == ["50.0", "80.0", "30.0"]
+    assert ">original method</span>" in row  # what it is to its paper, as on the public board
     public = client.get("/api/v1/leaderboard").json()
     held = client.get("/api/v1/leaderboard", params={"split": "heldout"}).json()
     # The API's held-out board carries the same signal; the public board has none.
