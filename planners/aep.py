@@ -38,6 +38,12 @@ from planners.nbvp import NbvpConfig, NbvpPlanner
 from planners.spatial import SpatialIndex
 
 
+def _flown_m(here: FloatArray, waypoints: FloatArray) -> float:
+    """Length, m, of the polyline from `here` through the (N, 4) waypoints' positions."""
+    return float(np.sum(np.linalg.norm(np.diff(np.vstack([here, waypoints[:, :3]]), axis=0),
+                        axis=1)))
+
+
 class AepBaseConfig(NbvpConfig):
     """AEP's settings shared by its versions. Unless noted, defaults are those of the public
     AEP configuration the benchmark's authors used on MAZE (`aep/...` keys of its `maze.yaml`).
@@ -195,8 +201,7 @@ class AepPlanner(NbvpPlanner):
                 else:
                     self._cache.remove(ident)
                     continue
-            length = float(np.sum(np.linalg.norm(np.diff(np.vstack([here, waypoints[:, :3]]),
-                                                         axis=0), axis=1)))
+            length = _flown_m(here, waypoints)
             score = view_gain.gain * math.exp(-cfg.degressive_coeff * length)
             if best is None or score > best[0]:
                 best = (score, waypoints)
@@ -231,8 +236,7 @@ class AepPlanner(NbvpPlanner):
                 # Ours: the original's tree would search until it reached a goal.
                 self._cache.remove(ident)
                 continue
-            length = float(np.sum(np.linalg.norm(np.diff(np.vstack([here, waypoints[:, :3]]),
-                                                         axis=0), axis=1)))
+            length = _flown_m(here, waypoints)
             if best is None or length < best[0]:
                 best = (length, waypoints)
         if best is None:

@@ -38,6 +38,15 @@ def _corridor(known_until_x: float) -> np.ndarray:
     return state
 
 
+def _long_corridor() -> np.ndarray:
+    """A closed corridor along +x, all known and free inside."""
+    state = np.full(SHAPE, VoxelState.FREE, dtype=np.uint8)
+    state[:, 0, :] = state[:, -1, :] = VoxelState.OCCUPIED
+    state[:, :, 0] = state[:, :, -1] = VoxelState.OCCUPIED
+    state[0, :, :] = state[-1, :, :] = VoxelState.OCCUPIED
+    return state
+
+
 def _context(seed: int = 0) -> PlannerContext:
     return PlannerContext(
         area="corridor", bounds_min=np.zeros(3), bounds_max=np.array(SHAPE) * VOXEL,
@@ -235,10 +244,7 @@ def test_aep_goes_back_to_a_cached_view_when_the_local_gain_runs_out() -> None:
     assert len(planner._cache) > 0
     # Far down a long known corridor, out of the local tree's reach, the only unknown is back
     # where the cache remembers it.
-    long = np.full(SHAPE, VoxelState.FREE, dtype=np.uint8)
-    long[:, 0, :] = long[:, -1, :] = VoxelState.OCCUPIED
-    long[:, :, 0] = long[:, :, -1] = VoxelState.OCCUPIED
-    long[0, :, :] = long[-1, :, :] = VoxelState.OCCUPIED
+    long = _long_corridor()
     long[3:6, 5:35, 3:22] = VoxelState.UNKNOWN  # some unknown left behind the start
     far = np.array([7.5, 2.0, 1.25])
     plan = planner.plan(_observe(long, position=far, outcome=PlanOutcome.REACHED))
@@ -287,15 +293,6 @@ def _aep_v4(**settings: object) -> AepPlanner:
     assert isinstance(planner, AepPlanner)
     planner.reset(_context())
     return planner
-
-
-def _long_corridor() -> np.ndarray:
-    """A closed corridor along +x, all known and free inside."""
-    state = np.full(SHAPE, VoxelState.FREE, dtype=np.uint8)
-    state[:, 0, :] = state[:, -1, :] = VoxelState.OCCUPIED
-    state[:, :, 0] = state[:, :, -1] = VoxelState.OCCUPIED
-    state[0, :, :] = state[-1, :, :] = VoxelState.OCCUPIED
-    return state
 
 
 def test_aep_v4_is_the_newest_aep_and_keeps_the_published_thresholds() -> None:
