@@ -366,8 +366,10 @@ class EpisodeLoop:
     def finish(self, ending: Ending) -> EpisodeResult:
         """Score the run (once it has ended)."""
         simulated_until = self.world.time
-        # Scoring needs no physics; the world's collision meshes go before the final mesh is made.
+        # Scoring needs no physics and no camera; the world's collision meshes and the camera's
+        # scene go before the final mesh is made.
         self.world.close()
+        self.sensing.camera.close()
         t0 = time.perf_counter()
         self.recorder.finish(simulated_until, self.sensing)
         self.costs.recording += time.perf_counter() - t0

@@ -105,6 +105,16 @@ def test_centre_pixel_depth_is_the_distance_to_the_facing_wall() -> None:
     assert frame.depth[CENTRE] == pytest.approx(3.0, abs=1e-5)  # wall x = 4
 
 
+def test_a_closed_camera_renders_no_more() -> None:
+    cam = camera(ODD)
+    cam.close()
+    assert cam.closed
+    with pytest.raises(RuntimeError, match="closed"):
+        cam.render(Pose(POSITION, 0.0))
+    with pytest.raises(RuntimeError, match="closed"):
+        cam.distance_to_surface(POSITION)
+
+
 @pytest.mark.parametrize(
     ("yaw", "distance"),
     [(0.0, 3.0), (np.pi / 2, 2.5), (np.pi, 1.0), (-np.pi / 2, 1.5)],

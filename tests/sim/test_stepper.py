@@ -40,4 +40,6 @@ def test_a_stepper_refuses_steps_after_the_end() -> None:
     with pytest.raises(RuntimeError, match="ended"):
         stepper.step(None)
     assert stepper.result().sim_seconds == pytest.approx(0.5)
+    # Scoring lets go of what only the flight needed, before the final mesh is made.
+    assert stepper.loop.sensing.camera.closed
     stepper.close()
