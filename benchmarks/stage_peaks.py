@@ -1,7 +1,7 @@
 """Which stage of a run sets its peak resident memory, and what the TSDF's block table did.
 
     .venv/bin/python benchmarks/stage_peaks.py [--planner splatplanner] [--area facility-c]
-        [--seed 0] [--seconds S] [--preset default] [--no-recording]
+        [--seed 0] [--seconds S] [--preset default] [--no-recording] [--out NAME]
 
 One run, as the crash sweep and the workers fly it (its recording written to a temporary
 folder unless `--no-recording`), in this process. Before each call of a stage the kernel's
@@ -55,7 +55,8 @@ class StagePeaks:
 
     def note(self, stage: str, high: float, before: float) -> None:
         if stage not in self.peaks or high > self.peaks[stage][0]:
-            self.peaks[stage] = (high, high - before)
+            # The mark is reset to the resident set a moment after `before` is read.
+            self.peaks[stage] = (high, max(0.0, high - before))
 
     def wrap(self, owner: Any, name: str, stage: str) -> None:
         inner: Callable[..., Any] = getattr(owner, name)
@@ -113,6 +114,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="simulated seconds (default: the area's plateau time)")
     parser.add_argument("--preset", default="default")
     parser.add_argument("--no-recording", action="store_true")
+    parser.add_argument("--out", default="stage_peaks",
+                        help="the JSON's name in benchmarks/results/")
     args = parser.parse_args(argv)
 
     from areas import load_area, load_ground_truth
@@ -157,7 +160,7 @@ def main(argv: list[str] | None = None) -> int:
                     for g in table["growths"])
           + f"; {table['final_blocks']:,} blocks at the end "
           f"({table['final_blocks'] / table['expected']:.3f} of expected)")
-    path = write_json("stage_peaks", {
+    path = write_json(args.out, {
         "planner": planner_id, "area": args.area, "seed": args.seed, "preset": args.preset,
         "benchmark": benchmark_version(), "recording": not args.no_recording,
         "simulated_until": result.simulated_until, "coverage": result.coverage,
