@@ -140,45 +140,53 @@ def _find(parent: IndexArray, p: int) -> int:
 
 
 @numba.njit(cache=True)
-def _connected(
-    indices: IndexArray, key: IndexArray, lookup: npt.NDArray[np.int32]
-) -> tuple[IndexArray, int]:
+def _connected(indices: IndexArray, key: IndexArray, ny: int, nz: int) -> tuple[IndexArray, int]:
     """26-connected components of a voxel set, joining only voxels with equal `key`.
 
-    indices: (K, 3) int64 distinct in-grid voxels in C order.
+    indices: (K, 3) int64 distinct voxels of a grid with `ny` x `nz` columns, in C order.
     key: (K,) int64.
-    lookup: (nx, ny, nz) int32 all -1; used as scratch and left all -1, so the cost is
-        proportional to K, not to the grid.
 
     Returns:
         (K,) int64 labels 0 .. n-1 numbered in C order of each component's first voxel, and n.
     """
-    ny, nz = lookup.shape[1], lookup.shape[2]
     count = indices.shape[0]
+    flat = np.empty(count, dtype=np.int64)
     for p in range(count):
-        lookup[indices[p, 0], indices[p, 1], indices[p, 2]] = p
+        flat[p] = (indices[p, 0] * ny + indices[p, 1]) * nz + indices[p, 2]
+    # Each pair is joined once, from its later voxel: only the 13 neighbours before p in C
+    # order are looked for: (i, j, k - 1), which can only be p - 1, and four rows of three
+    # (i - 1 with j - 1, j, j + 1; i with j - 1; each k - 1 .. k + 1). The voxels are sorted, so
+    # where each row starts moves forward with p: one cursor per row walks the list once, in
+    # place of a lookup grid the size of the map (random reads over the whole grid).
+    rows_i = (-1, -1, -1, 0)
+    rows_j = (-1, 0, 1, -1)
+    cursor = np.zeros(4, dtype=np.int64)
     parent = np.arange(count)
     for p in range(count):
         i, j, k = indices[p, 0], indices[p, 1], indices[p, 2]
-        rp = _find(parent, p)
-        # Each pair is joined once, from its later voxel: only the 13 neighbours before p in
-        # C order are looked up.
-        for a in range(max(i - 1, 0), i + 1):
-            for b in range(max(j - 1, 0), min(j + 2, ny)):
-                if a == i and b > j:
-                    break
-                for c in range(max(k - 1, 0), min(k + 2, nz)):
-                    if a == i and b == j and c >= k:
-                        break
-                    q = lookup[a, b, c]
-                    if q < 0 or key[q] != key[p]:
-                        continue
+        rp = p
+        if k > 0 and p > 0 and flat[p - 1] == flat[p] - 1 and key[p - 1] == key[p]:
+            rp = _find(parent, p - 1)
+            parent[p] = rp
+        for row in range(4):
+            a = i + rows_i[row]
+            b = j + rows_j[row]
+            if a < 0 or b < 0 or b >= ny:
+                continue
+            base = (a * ny + b) * nz
+            first = base + max(k - 1, 0)
+            last = base + min(k + 1, nz - 1)
+            q = cursor[row]
+            while q < p and flat[q] < first:
+                q += 1
+            cursor[row] = q
+            while q < p and flat[q] <= last:
+                if key[q] == key[p] and parent[q] != rp:
                     rq = _find(parent, q)
                     if rp != rq:
                         parent[max(rp, rq)] = min(rp, rq)
                         rp = min(rp, rq)
-    for p in range(count):
-        lookup[indices[p, 0], indices[p, 1], indices[p, 2]] = -1
+                q += 1
     # Each root is its component's smallest member, so numbering roots in order follows C order.
     labels = np.empty(count, dtype=np.int64)
     n = 0
@@ -271,7 +279,6 @@ class FrontierTracker:
         self._subscription = occupancy.subscribe()
         self._frontier = np.zeros(occupancy.shape, dtype=bool)
         self._count = 0
-        self._lookup = np.full(occupancy.shape, -1, dtype=np.int32)  # scratch for clustering
         self.full_recompute()
 
     @property
@@ -329,10 +336,10 @@ class FrontierTracker:
         if self._count == 0:
             return []
         indices = _true_indices(self._frontier, self._count)  # (F, 3), C order
-        components, n = _connected(indices, np.zeros(len(indices), dtype=np.int64),
-                                   self._lookup)
+        _, ny, nz = self._map.shape
+        components, n = _connected(indices, np.zeros(len(indices), dtype=np.int64), ny, nz)
         keys = _cell_keys(indices, components, n, max_extent_m / self._map.voxel_size)
-        labels, n = _connected(indices, keys, self._lookup)
+        labels, n = _connected(indices, keys, ny, nz)
 
         sizes = np.bincount(labels, minlength=n)
         mean_dir, centre_sums = _label_sums(self._map.state, indices, labels, n,
