@@ -72,11 +72,10 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(_child(args.planners, args.seed, args.seconds)))
         return 0
     sys.path.insert(0, str(HERE))
-    from benchmarks.common import print_table, write_json
+    from benchmarks.common import checked_baseline, print_table, write_json
 
-    if args.baseline is not None and not (args.baseline / "sim").is_dir():
-        raise SystemExit(f"--baseline {args.baseline}: not a checkout (no sim/ folder in it)")
-    trees = [("this", HERE)] + ([("baseline", args.baseline.resolve())] if args.baseline else [])
+    baseline = checked_baseline(args.baseline)
+    trees = [("this", HERE)] + ([("baseline", baseline)] if baseline else [])
     rows, out = [], []
     for planner in (p.strip() for p in args.planners.split(",")):
         for label, tree in trees:

@@ -21,6 +21,16 @@ import flybo  # noqa: F401  before NumPy loads: it pins the CPU kernels (flybo.c
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
+def checked_baseline(baseline: Path | None, folder: str = "sim") -> Path | None:
+    """A `--baseline` tree's folder, resolved, or None; exits naming the option when the folder
+    holds no `folder/` (not a checkout of this project)."""
+    if baseline is None:
+        return None
+    if not (baseline / folder).is_dir():
+        raise SystemExit(f"--baseline {baseline}: not a checkout (no {folder}/ folder in it)")
+    return baseline.resolve()
+
+
 def peak_rss_mib() -> float:
     """Peak resident memory of this process so far, MiB."""
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0

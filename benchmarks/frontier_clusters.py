@@ -93,13 +93,12 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(_child(args.area, args.seconds, args.planner, args.preset)))
         return 0
     sys.path.insert(0, str(HERE))
-    from benchmarks.common import print_table, write_json
+    from benchmarks.common import checked_baseline, print_table, write_json
 
-    if args.baseline is not None and not (args.baseline / "sim").is_dir():
-        raise SystemExit(f"--baseline {args.baseline}: not a checkout (no sim/ folder in it)")
+    baseline = checked_baseline(args.baseline)
     if args.rounds < 1:
         raise SystemExit(f"--rounds {args.rounds}: at least 1")
-    trees = [("this", HERE)] + ([("baseline", args.baseline.resolve())] if args.baseline else [])
+    trees = [("this", HERE)] + ([("baseline", baseline)] if baseline else [])
     runs: list[dict[str, Any]] = []
     for round_ in range(args.rounds):
         for label, tree in trees:

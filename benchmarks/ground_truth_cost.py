@@ -89,17 +89,16 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     sys.path.insert(0, str(HERE))
     from areas import area_names
-    from benchmarks.common import print_table, write_json
+    from benchmarks.common import checked_baseline, print_table, write_json
 
-    if args.baseline is not None and not (args.baseline / "areas").is_dir():
-        raise SystemExit(f"--baseline {args.baseline}: not a checkout (no areas/ folder in it)")
+    baseline = checked_baseline(args.baseline, "areas")
     names = list(area_names()) if args.areas == "all" else [
         a.strip() for a in args.areas.split(",")]
     unknown = sorted(set(names) - set(area_names()))
     if unknown:
         raise SystemExit(f"unknown areas: {', '.join(unknown)} (known: "
                          f"{', '.join(area_names())})")
-    trees = [("this", HERE)] + ([("baseline", args.baseline.resolve())] if args.baseline else [])
+    trees = [("this", HERE)] + ([("baseline", baseline)] if baseline else [])
     rows, results = [], []
     for name in names:
         measured = {label: _measure(tree, name, args.repeat) for label, tree in trees}

@@ -194,12 +194,11 @@ def main(argv: list[str] | None = None) -> int:
         sys.path.insert(0, str(args.child_tree))
         print(json.dumps(_measure(seeds)))
         return 0
-    if args.baseline is not None and not (args.baseline / "sim").is_dir():
-        raise SystemExit(f"--baseline {args.baseline}: not a checkout (no sim/ folder in it)")
     sys.path.insert(0, str(HERE))
-    from benchmarks.common import print_table, write_json
+    from benchmarks.common import checked_baseline, print_table, write_json
 
-    trees = [("this", HERE)] + ([("baseline", args.baseline.resolve())] if args.baseline else [])
+    baseline = checked_baseline(args.baseline)
+    trees = [("this", HERE)] + ([("baseline", baseline)] if baseline else [])
     measured = {label: _in_tree(tree, seeds) for label, tree in trees}
     keys = ["ever_occupied", "free_after_occupied", "held", "free_after_held", "speckle_ever",
             "speckle_end", "traversable_end"]

@@ -121,11 +121,10 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(_child(args.planners, args.areas, args.seconds, args.preset)))
         return 0
     sys.path.insert(0, str(HERE))
-    from benchmarks.common import print_table, write_json
+    from benchmarks.common import checked_baseline, print_table, write_json
 
-    if args.baseline is not None and not (args.baseline / "sim").is_dir():
-        raise SystemExit(f"--baseline {args.baseline}: not a checkout (no sim/ folder in it)")
-    trees = [("this", HERE)] + ([("baseline", args.baseline.resolve())] if args.baseline else [])
+    baseline = checked_baseline(args.baseline)
+    trees = [("this", HERE)] + ([("baseline", baseline)] if baseline else [])
     runs: list[dict[str, Any]] = []
     for area in (a.strip() for a in args.areas.split(",")):
         for planner in (p.strip() for p in args.planners.split(",")):
