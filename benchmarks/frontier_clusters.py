@@ -36,6 +36,10 @@ def _child(area_name: str, seconds: float, planner: str, preset_name: str) -> di
     from sim.config import preset
     from sim.episode import run_episode
 
+    area = load_area(area_name)
+    truth = load_ground_truth(area)
+    # A short flight first, so that every kernel is compiled or loaded from its cache.
+    run_episode(area, truth, make(planner), preset(preset_name), 0, seconds=10.0)
     original = frontiers.FrontierTracker.clusters
     calls: list[tuple[float, int]] = []
     digest = hashlib.sha256()
@@ -50,12 +54,6 @@ def _child(area_name: str, seconds: float, planner: str, preset_name: str) -> di
         return result
 
     frontiers.FrontierTracker.clusters = timed  # type: ignore[method-assign]
-    area = load_area(area_name)
-    truth = load_ground_truth(area)
-    # A short flight first, so that every kernel is compiled or loaded from its cache.
-    run_episode(area, truth, make(planner), preset(preset_name), 0, seconds=10.0)
-    calls.clear()
-    digest = hashlib.sha256()
     result = run_episode(area, truth, make(planner), preset(preset_name), 0, seconds=seconds,
                          planner_name=spec(planner).id, preset_name=preset_name)
     times = [c[0] * 1e3 for c in calls]
@@ -114,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
                 ["tree", "round", "planner", "area", "until s", "calls", "frontier voxels",
                  "median ms", "max ms", "total s", "digest"], rows)
     summary: dict[str, Any] = {}
-    if args.baseline:
+    if baseline:
         this = [r for r in runs if r["tree"] == "this"]
         base = [r for r in runs if r["tree"] == "baseline"]
         ratios = [t["total_ms"] / b["total_ms"] for t, b in zip(this, base, strict=True)]
@@ -123,8 +121,8 @@ def main(argv: list[str] | None = None) -> int:
         print("\ntotal clustering time, this / baseline, per round: "
               + ", ".join(f"{r:.3f}" for r in ratios)
               + f"; the same clusters in both trees: {'yes' if same else 'NO'}")
-    path = write_json(args.out, {"runs": runs, "seconds": args.seconds,
-                                            "preset": args.preset, **summary})
+    path = write_json(args.out, {"runs": runs, "seconds": args.seconds, "preset": args.preset,
+                                 **summary})
     print(f"\nwrote {path}")
     return 0
 
