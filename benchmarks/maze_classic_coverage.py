@@ -16,9 +16,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from areas import load_area, load_ground_truth
 from benchmarks.common import peak_rss_mib, print_table, write_json
-from planners.registry import make
+from planners.registry import make, spec
 from sim.config import preset
 from sim.episode import run_episode
+
+# The newest original Classic, named by its id in the results.
+CLASSIC = spec("classic").id
 
 
 def main() -> None:
@@ -31,8 +34,8 @@ def main() -> None:
     runs = []
     for seed in args.seeds:
         t0 = time.perf_counter()
-        result = run_episode(area, truth, make("classic"), preset(args.preset), seed,
-                             planner_name="classic-v1", preset_name=args.preset)
+        result = run_episode(area, truth, make(CLASSIC), preset(args.preset), seed,
+                             planner_name=CLASSIC, preset_name=args.preset)
         wall = time.perf_counter() - t0
         volume_at = dict(zip(result.volume_times.round().astype(int), result.volume_m3,
                              strict=True))

@@ -23,7 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from areas import load_area, load_ground_truth
 from benchmarks.common import peak_rss_mib, print_table, write_json
-from planners.registry import make
+from planners.registry import make, spec
 from sim.camera import DepthCamera
 from sim.config import EpisodeConfig, preset
 from sim.episode import run_episode
@@ -31,6 +31,9 @@ from sim.geometry import Pose
 from sim.noise import OdometryDrift, add_depth_noise
 from sim.occupancy import OccupancyMap
 from sim.recording import Recording
+
+# The newest original Classic, named by its id in the results.
+CLASSIC = spec("classic").id
 
 
 def replay_volume(area_name: str, poses: np.ndarray, config: EpisodeConfig, every: int,
@@ -69,10 +72,10 @@ def main() -> None:
     recording.parent.mkdir(parents=True, exist_ok=True)
     # A short episode first loads (or, after an edit, compiles) the numba kernels, a one-off
     # cost per installation that is not the simulation's speed.
-    run_episode(area, truth, make("classic"), config, args.seed, seconds=5.0)
+    run_episode(area, truth, make(CLASSIC), config, args.seed, seconds=5.0)
     started = time.perf_counter()
-    result = run_episode(area, truth, make("classic"), config, args.seed,
-                         planner_name="classic-v1", preset_name="default",
+    result = run_episode(area, truth, make(CLASSIC), config, args.seed,
+                         planner_name=CLASSIC, preset_name="default",
                          seconds=args.seconds, recording_path=recording)
     wall = time.perf_counter() - started
     simulated = result.simulated_until
@@ -104,7 +107,7 @@ def main() -> None:
         fidelity = compare_fusion(recording, simulated, config, args.seed)
     path = write_json("sim_speed_no_replay" if args.no_replay else "sim_speed", {
         "command": "python benchmarks/sim_speed.py " + " ".join(sys.argv[1:]),
-        "area": "maze", "planner": "classic-v1", "preset": "default", "seed": args.seed,
+        "area": "maze", "planner": CLASSIC, "preset": "default", "seed": args.seed,
         "simulated_s": simulated, "wall_s": wall, "realtime_factor": simulated / wall,
         "peak_rss_mib": peak_rss_mib(), "frame_costs_ms": costs,
         "coverage": result.coverage, "status": result.status.value,

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from planners.aep import Aep, AepV1, AepV3, AepV4
 from planners.api import Planner
-from planners.classic import Classic, ClassicV2
+from planners.classic import Classic, ClassicV2, ClassicV3
 from planners.esm import EsmRecon, EsmV1
 from planners.esm_continuous import EsmContinuous, EsmReconContinuous
 from planners.esm_horizon import EsmHorizon, EsmHorizonV3, EsmReconHorizon, EsmReconHorizonV3
@@ -56,6 +56,12 @@ BUILTINS: tuple[tuple[str, int, type[Planner], str, str, str], ...] = (
         "Nearest unvisited frontier by path length (Yamauchi 1997), replanned at every "
         "waypoint; the frontier looked at from a reached viewpoint counts as visited, and a "
         "vehicle the map closed in on escapes through known free space.",
+        _CLASSIC_REFERENCE,
+    ),
+    (
+        "classic", 3, ClassicV3, ORIGINAL,
+        "As classic-v2, with the path shortcut from the vehicle's exact position, so that it "
+        "never flies back to its voxel's centre to ask again.",
         _CLASSIC_REFERENCE,
     ),
     (

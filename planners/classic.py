@@ -12,7 +12,10 @@ the frontier voxel (`planners.viewpoints.sees_into_unknown`); keeps Yamauchi's l
 frontiers: every frontier voxel the camera looked into from a reached viewpoint counts as
 visited, besides the target (`planners.give_up`); and where the map no longer lets the vehicle
 stand, it searches from the traversable voxels the framework lets it escape to
-(`planners.waypoints.escape_starts`), trying the next pocket when one leads nowhere.
+(`planners.waypoints.escape_starts`), trying the next pocket when one leads nowhere. classic-v3
+(`ClassicV3Config`) shortcuts the path from the vehicle's exact position, where v2 could fly back
+to its voxel's centre and ask again there for ever
+(`planners.waypoints.shortcut_from_position`).
 """
 
 from __future__ import annotations
@@ -27,7 +30,12 @@ from planners.api import Observation, Plan, Planner, PlannerConfig, PlannerConte
 from planners.give_up import GiveUpTracker
 from planners.search import BoolGrid, DistanceField, IndexArray, shortcut
 from planners.viewpoints import ViewpointCandidates, ring_offsets
-from planners.waypoints import escape_starts, nearest_traversable, path_waypoints
+from planners.waypoints import (
+    escape_starts,
+    nearest_traversable,
+    path_waypoints,
+    shortcut_from_position,
+)
 
 # Pockets of traversable space an escaping vehicle tries before the exploration ends: each
 # failed search floods its whole pocket.
@@ -67,6 +75,14 @@ class ClassicConfig(PlannerConfig):
     # when one leads to no viewpoint. None (v1): the nearest traversable voxel within 3, or the
     # end of the exploration.
     escape_reach_voxels: int | None = Field(None, ge=1)
+    # v3: Yamauchi's robot follows its path from where it stands. The vehicle comes to rest
+    # within millimetres of a waypoint, not on the voxel centre the search starts from; where
+    # the straight leg from its exact position to the path's next vertex leaves the traversable
+    # voxels, v1 and v2 fly back to that centre first and ask again there (every waypoint), which
+    # in a map that no longer changes repeats for ever (`docs/planners/classic.md`). True: the
+    # path is shortcut from the exact position instead
+    # (`planners.waypoints.shortcut_from_position`). False (v1, v2): from the voxel's centre.
+    shortcut_from_position: bool = False
 
 
 class ClassicV2Config(ClassicConfig):
@@ -77,6 +93,13 @@ class ClassicV2Config(ClassicConfig):
     view_into_unknown: bool = True
     visited_view_reach_m: float | None = Field(3.5, gt=0.0)
     escape_reach_voxels: int | None = Field(10, ge=1)
+
+
+class ClassicV3Config(ClassicV2Config):
+    """classic-v3: as classic-v2, with the path shortcut from the vehicle's exact position, so
+    that it does not fly back to its voxel's centre (see the field's comment)."""
+
+    shortcut_from_position: bool = True
 
 
 class ClassicPlanner(Planner):
@@ -132,7 +155,9 @@ class ClassicPlanner(Planner):
                 return Plan.finished("no frontier can be seen from traversable space")
             return Plan.finished("no frontier viewpoint is reachable")
         self._goal, self._target = goal, candidates.target_at(goal)
-        path = shortcut(field.path_to(goal), view.traversable)
+        found = field.path_to(goal)
+        path = (shortcut_from_position(view, found, obs.pose.position)
+                if cfg.shortcut_from_position else shortcut(found, view.traversable))
         target_world = view.index_to_world(self._target[None])[0]
         waypoints = path_waypoints(view, path, obs.pose.position, target_world)
         return Plan(
@@ -173,6 +198,13 @@ class ClassicV2(ClassicPlanner):
 
     config_model = ClassicV2Config
     config: ClassicV2Config
+
+
+class ClassicV3(ClassicPlanner):
+    """classic-v3."""
+
+    config_model = ClassicV3Config
+    config: ClassicV3Config
 
 
 def frontier_fallback(fallback: ClassicPlanner, obs: Observation, **info: Any) -> Plan:

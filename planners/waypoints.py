@@ -105,6 +105,39 @@ def grid_path(view: MapView, paths: PathCache, position: npt.ArrayLike,
     return shortcut(path, view.traversable), goal
 
 
+def shortcut_from_position(view: MapView, path: IndexArray,
+                           position: npt.ArrayLike) -> IndexArray:
+    """`shortcut(path)` for a voxel path (K, 3) that starts in the vehicle's own voxel, with its
+    first leg flyable from the vehicle's exact `position` (world (3,)) rather than from that
+    voxel's centre, where the search started.
+
+    Where the straight leg from `position` to the shortcut path's second voxel leaves the
+    traversable voxels, the second voxel is instead the farthest voxel of `path` that a straight
+    leg from `position` reaches, and the rest is shortcut from there; `path_waypoints` then
+    drops the own voxel. The shortcut path is returned unchanged when the path does not start in
+    the own voxel or when its first leg is clear. A search that cuts no corners (`DistanceField`)
+    leaves the next path voxel always reachable from within the own voxel; for a path whose
+    steps may cut corners no leg may reach one, and the shortcut path is returned too
+    (`path_waypoints` keeps the own voxel's centre as the first waypoint then)."""
+    short = shortcut(path, view.traversable)
+    if len(path) < 2:
+        return short
+    pos = np.asarray(position, dtype=np.float64)
+    here = view.world_to_index(pos[None])[0]
+    if not np.array_equal(path[0], here):
+        return short
+    start = (pos - view.origin) / view.voxel_size
+    if segment_clear(view.traversable, start, short[1].astype(np.float64) + 0.5):
+        return short
+    centres = path.astype(np.float64) + 0.5
+    far = len(path) - 1
+    while far >= 1 and not segment_clear(view.traversable, start, centres[far]):
+        far -= 1
+    if far == 0:
+        return short
+    return np.vstack([path[:1], shortcut(path[far:], view.traversable)])
+
+
 def path_waypoints(
     view: MapView,
     path: IndexArray,

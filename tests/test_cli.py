@@ -125,9 +125,9 @@ def test_existing_out_file_is_refused(tmp_path: Path, capsys: pytest.CaptureFixt
         ('"text"', "JSON object"),
         ("3", "JSON object"),
         ("{not json", "--planner-config"),
-        ('{"no_such_key": 1}', "classic-v2"),
-        ('{"min_cluster_size": "many"}', "classic-v2"),
-        ('{"min_cluster_size": 0}', "classic-v2"),
+        ('{"no_such_key": 1}', "classic-v3"),
+        ('{"min_cluster_size": "many"}', "classic-v3"),
+        ('{"min_cluster_size": 0}', "classic-v3"),
     ],
 )
 def test_bad_planner_config_is_refused(config: str, expected: str, tmp_path: Path,
@@ -224,7 +224,7 @@ def test_short_run_writes_its_results(tmp_path: Path, capsys: pytest.CaptureFixt
                 "path_length_m", "iterations", "planning_time_ms", "surface", "series"):
         assert key in result, key
     assert result["area"] == "maze"
-    assert result["planner"] == "classic-v2"
+    assert result["planner"] == "classic-v3"
     assert result["seed"] == 0
     assert result["preset"] == "exact"
     assert result["status"] == "succeeded"
@@ -261,7 +261,7 @@ def test_short_run_writes_its_results(tmp_path: Path, capsys: pytest.CaptureFixt
 
     recording = Recording(out / "recording.npz")
     assert recording.header["area"] == "maze"
-    assert recording.header["planner"] == "classic-v2"
+    assert recording.header["planner"] == "classic-v3"
     assert recording.header["seed"] == 0
     assert len(recording.pose_times) > 0
     assert recording.poses.shape == (len(recording.pose_times), 4)

@@ -26,7 +26,7 @@ def test_the_same_tree_as_baseline_gives_the_same_clusters() -> None:
     assert report["same_clusters"] is True
     this, base = report["runs"]
     assert (this["tree"], base["tree"]) == ("this", "baseline")
-    assert this["planner"] == "classic-v2" and this["preset"] == "exact"
+    assert this["planner"] == "classic-v3" and this["preset"] == "exact"
     assert this["calls"] == base["calls"] > 0
     assert this["digest"] == base["digest"]
     assert 0 < this["median_ms"] <= this["max_ms"] <= this["total_ms"]

@@ -106,7 +106,7 @@ def test_changed_planner_must_be_registered_as_a_new_version(tree: dict[str, Any
     lock["planners"]["aep-v1"] = "1" * 64
     problems = check_lock(lock, tree["components"], tree["planners"])
     assert len(problems) == 2
-    assert any(p.startswith("planner classic-v1 changed: register it as classic-v3")
+    assert any(p.startswith("planner classic-v1 changed: register it as classic-v4")
                for p in problems), problems
     # The next version is after the newest one registered, not after the changed one.
     assert any(p.startswith("planner aep-v1 changed: register it as aep-v5")
@@ -213,7 +213,7 @@ def test_hashes_are_stable(tree: dict[str, Any]) -> None:
     assert component_hashes() == tree["components"]
     assert planner_fingerprints() == tree["planners"]
     assert planner_fingerprint("classic-v1") == tree["planners"]["classic-v1"]
-    assert planner_fingerprint(" Classic ") == tree["planners"]["classic-v2"]  # the default
+    assert planner_fingerprint(" Classic ") == tree["planners"]["classic-v3"]  # the default
 
 
 def test_every_planner_id_has_its_own_fingerprint(tree: dict[str, Any]) -> None:

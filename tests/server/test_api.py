@@ -201,7 +201,7 @@ def test_a_job_shows_its_group(client: TestClient, tokens: Any) -> None:
         "planners": ["classic"], "areas": ["maze"], "runs": 1, "seconds": 30}).json()
     grouped_id = group["planners"][0]["jobs"][0]
     grouped = client.get(f"/api/v1/jobs/{grouped_id}").json()
-    assert grouped["group_id"] == group["id"] and grouped["planner"] == "classic-v2"
+    assert grouped["group_id"] == group["id"] and grouped["planner"] == "classic-v3"
     assert client.get(f"/api/v1/jobs/{plain.json()['id']}").json()["group_id"] is None
     listed = client.get("/api/v1/jobs").json()["items"]
     assert {j["id"]: j["group_id"] for j in listed} == {grouped_id: group["id"],

@@ -132,7 +132,7 @@ def test_embedded_service(tmp_path: Path) -> None:
         first = httpx.get(f"{base}/api/v1/runs/{job['runs'][0]['id']}").json()
         assert board["benchmark_version"] == first["result"]["benchmark_version"]
         entry = board["entries"][0]
-        assert (entry["planner"], entry["area"], entry["runs"]) == ("classic-v2", "maze", 2)
+        assert (entry["planner"], entry["area"], entry["runs"]) == ("classic-v3", "maze", 2)
         assert board["overall"][0]["rank"] == 1
         assert elapsed < 240
 
@@ -141,7 +141,7 @@ def test_embedded_service(tmp_path: Path) -> None:
         shown = _cli([*client, "jobs", str(job["id"]), "--server", base], env)
         assert shown.returncode == 0 and "succeeded" in shown.stdout
         results = _cli([*client, "results", "--server", base], env)
-        assert results.returncode == 0 and "classic-v2" in results.stdout
+        assert results.returncode == 0 and "classic-v3" in results.stdout
         refused = _cli([*client, "submit", "--server", base, "--token", token, "--planner",
                         "teleport", "--areas", "maze"], env)
         assert refused.returncode == 2 and "classic-v1" in refused.stderr

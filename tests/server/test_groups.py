@@ -44,7 +44,7 @@ def test_a_group_holds_one_job_per_planner(client: TestClient, tokens: Any,
     assert group["name"] == "suite one" and group["owner"] == "alice"
     assert group["status"] == "queued" and group["runs"] == 4 and group["done"] == 0
     assert group["by_status"]["queued"] == 4 and group["areas"] == ["maze"]
-    assert [p["planner"] for p in group["planners"]] == ["classic-v2", "rapid-v2"]
+    assert [p["planner"] for p in group["planners"]] == ["classic-v3", "rapid-v2"]
     assert all(p["runs"] == 2 and len(p["jobs"]) == 1 and p["simulated_s"] == 60
                for p in group["planners"])
     assert _counts(sessions) == (1, 2, 4)
@@ -68,7 +68,7 @@ def test_all_and_time_scale(client: TestClient, tokens: Any,
     planners = [p["planner"] for p in group["planners"]]
     # "all" is the default version of every registered name, one each: its newest original
     # version (fuel-v2 is a variant of fuel-v1).
-    assert "classic-v2" in planners and "classic-v1" not in planners
+    assert "classic-v3" in planners and "classic-v2" not in planners
     assert "fuel-v1" in planners and "fuel-v2" not in planners
     names = [p.rsplit("-v", 1)[0] for p in planners]
     assert len(names) == len(set(names)) >= 2
@@ -95,7 +95,7 @@ def test_idempotency_key(client: TestClient, tokens: Any,
 @pytest.mark.parametrize(("changes", "needle"), [
     ({"planners": ["classic", "teleport"]}, "classic-v1"),  # lists the known planners
     ({"areas": ["maze", "atlantis"]}, "maze"),  # lists the known areas
-    ({"planners": ["classic", "classic-v2"]}, "repeat"),
+    ({"planners": ["classic", "classic-v3"]}, "repeat"),
     ({"planners": []}, "planners"),
     ({"areas": ["maze", "maze"]}, "repeat"),
     ({"areas": ["all", "maze"]}, "alone"),
@@ -207,7 +207,7 @@ def test_a_rerun_joins_the_group_in_place_of_the_job(client: TestClient, tokens:
     assert old["group_id"] == group["id"] and old["status"] == "failed"
     shown = client.get(f"/api/v1/groups/{group['id']}").json()
     assert [(p["planner"], p["jobs"]) for p in shown["planners"]] == [
-        ("classic-v2", [rerun["id"]]), ("rapid-v2", [rapid_job])]
+        ("classic-v3", [rerun["id"]]), ("rapid-v2", [rapid_job])]
     assert shown["runs"] == 4 and shown["done"] == 2 and shown["status"] == "running"
     assert shown["by_status"] == {"queued": 2, "running": 0, "succeeded": 2, "failed": 0,
                                   "cancelled": 0}
@@ -261,7 +261,7 @@ def test_flybo_benchmark_against_a_real_service(tmp_path: Path) -> None:
                                "1", "--seconds", "3", "--name", "tiny"], env=env,
                               capture_output=True, text=True, timeout=240)
         assert done.returncode == 0, done.stdout + done.stderr + _tail(logs)
-        assert "tiny): succeeded" in done.stdout and "classic-v2" in done.stdout
+        assert "tiny): succeeded" in done.stdout and "classic-v3" in done.stdout
         group = httpx.get(f"{base}/api/v1/groups/1").json()
         assert group["by_status"]["succeeded"] == 1 and group["status"] == "succeeded"
 

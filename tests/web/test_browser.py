@@ -14,15 +14,15 @@ from tests.web.conftest import ARTIFACTS, Service
 
 def test_leaderboard_shows_the_planner(page: Any, service: Service) -> None:
     page.goto(service.base + "/")
-    row = page.locator("#coverage-table tbody tr[data-planner='classic-v2']")
+    row = page.locator("#coverage-table tbody tr[data-planner='classic-v3']")
     assert row.count() == 1
     assert "baseline" in row.inner_text()
     board = service.get("/api/v1/leaderboard")
-    entry = next(e for e in board["entries"] if e["planner"] == "classic-v2")
+    entry = next(e for e in board["entries"] if e["planner"] == "classic-v3")
     mean, low, high = (entry["coverage"][k] * 100 for k in ("mean", "min", "max"))
     cell = row.locator("td").nth(2).inner_text()
     assert cell.startswith(f"{mean:.1f}") and f"{low:.1f}–{high:.1f}" in cell
-    assert page.locator("#area-table tbody tr", has_text="classic-v2").count() == 1
+    assert page.locator("#area-table tbody tr", has_text="classic-v3").count() == 1
     # Figure 4 holds one mean line (and band) per planner, 21 samples for 20 s runs.
     page.wait_for_function("() => document.getElementById('volume-chart').chart !== undefined")
     series = page.evaluate("document.getElementById('volume-chart').chart.data.length")
