@@ -4,8 +4,11 @@
         [--seconds 60] [--planner classic] [--rounds 2]
 
 A "worker" here is a process started with the environment `flybo serve --workers N` gives
-each worker (`flybo.worker_processes.worker_environment`), or, without the limit, with the
-thread variables removed (every library then uses every core). Each worker loads the areas,
+each worker (`flybo.worker_processes.worker_environment`: the usable cores shared out,
+"limited"), with one thread whatever the cores ("one thread"), or, without the limit, with the
+thread variables removed (every library then uses every core). One worker on one thread is
+what two workers on two cores are measured against for linear scaling: each of them flies on
+one thread. Each worker loads the areas,
 flies a 5 s MAZE warm-up (the compiled kernels), limits Open3D as a run in `flybo worker` does
 (`worker.threads.limit_open3d`), then waits; when all are ready they take the `--episodes`
 episodes (the areas in turn, default preset, seeds 0, 1, ...) from one shared queue, one at a
@@ -33,7 +36,10 @@ from benchmarks.common import print_table, write_json
 from flybo.worker_processes import worker_environment
 from worker.threads import LIBRARY_VARIABLES, THREADS_ENV, usable_cores
 
-SETUPS = ((1, False), (1, True), (2, False), (2, True))  # (workers, limited)
+# (workers, threads): "none" removes the limit, "shared" shares the usable cores out among the
+# workers (`flybo serve --workers N`), "one" gives each worker one thread.
+SETUPS = ((1, "none"), (1, "shared"), (1, "one"), (2, "none"), (2, "shared"))
+LABELS = {"none": "no limit", "shared": "limited", "one": "one thread"}
 
 
 def _child(folder: Path, planner: str, seconds: float) -> None:
@@ -70,13 +76,15 @@ def _child(folder: Path, planner: str, seconds: float) -> None:
     (folder / f"done-{os.getpid()}.json").write_text(json.dumps(done))
 
 
-def _environment(workers: int, limited: bool) -> dict[str, str]:
-    if limited:
+def _environment(workers: int, threads: str) -> dict[str, str]:
+    if threads == "shared":
         return worker_environment(workers)
+    if threads == "one":
+        return worker_environment(workers, 1)
     return {k: v for k, v in os.environ.items() if k not in (*LIBRARY_VARIABLES, THREADS_ENV)}
 
 
-def _measure(args: argparse.Namespace, workers: int, limited: bool) -> dict[str, Any]:
+def _measure(args: argparse.Namespace, workers: int, threads: str) -> dict[str, Any]:
     """The K episodes flown by `workers` worker processes; their time from the start signal."""
     with tempfile.TemporaryDirectory(prefix="flybo-scaling-") as name:
         folder = Path(name)
@@ -88,29 +96,28 @@ def _measure(args: argparse.Namespace, workers: int, limited: bool) -> dict[str,
             (folder / "queue" / str(index)).touch()
         command = [sys.executable, __file__, "--child", str(folder), "--planner", args.planner,
                    "--seconds", str(args.seconds)]
-        env = _environment(workers, limited)
+        env = _environment(workers, threads)
         load = os.getloadavg()[0]  # other work on the machine: the measurement's noise
         procs = [subprocess.Popen(command, env=env) for _ in range(workers)]
         while len(list(folder.glob("ready-*"))) < workers:
             if any(p.poll() not in (None, 0) for p in procs):
                 raise SystemExit("a worker process failed while starting")
             time.sleep(0.05)
-        threads = sorted({p.read_text() for p in folder.glob("ready-*")})
+        reported = sorted({p.read_text() for p in folder.glob("ready-*")})
         start = time.time()
         (folder / "go").touch()
         for proc in procs:
             if proc.wait() != 0:
                 raise SystemExit(f"a worker process failed ({proc.returncode})")
         episodes = [e for p in folder.glob("done-*.json") for e in json.loads(p.read_text())]
-    return {"workers": workers, "limited": limited, "threads": threads, "load_1min": load,
+    return {"workers": workers, "limit": threads, "threads": reported, "load_1min": load,
             "wall_s": max(e["end"] for e in episodes) - start,
             "episode_wall_s": sum(e["wall_s"] for e in episodes),
             "cpu_s": sum(e["cpu_s"] for e in episodes), "episodes": episodes}
 
 
-def _label(workers: int, limited: bool) -> str:
-    return f"{workers} worker{'s' if workers > 1 else ''}, " + ("limited" if limited else
-                                                              "no limit")
+def _label(workers: int, threads: str) -> str:
+    return f"{workers} worker{'s' if workers > 1 else ''}, {LABELS[threads]}"
 
 
 def main() -> None:
@@ -128,17 +135,17 @@ def main() -> None:
         return
     if args.rounds < 1 or args.episodes < 2 or args.seconds <= 0:
         parser.error("--rounds must be at least 1, --episodes 2 and --seconds positive")
-    measured: dict[tuple[int, bool], list[dict[str, Any]]] = {s: [] for s in SETUPS}
+    measured: dict[tuple[int, str], list[dict[str, Any]]] = {s: [] for s in SETUPS}
     rows = []
     for round_ in range(1, args.rounds + 1):
-        for workers, limited in SETUPS:
-            m = _measure(args, workers, limited)
-            measured[workers, limited].append(m)
-            rows.append([round_, _label(workers, limited), f"{m['wall_s']:.1f}",
+        for workers, threads in SETUPS:
+            m = _measure(args, workers, threads)
+            measured[workers, threads].append(m)
+            rows.append([round_, _label(workers, threads), f"{m['wall_s']:.1f}",
                          f"{m['cpu_s']:.1f}", f"{m['cpu_s'] / m['wall_s']:.2f}",
                          f"{args.episodes * args.seconds / m['wall_s']:.1f}",
                          f"{m['load_1min']:.1f}"])
-            print(f"round {round_} {_label(workers, limited)}: {m['wall_s']:.1f} s  "
+            print(f"round {round_} {_label(workers, threads)}: {m['wall_s']:.1f} s  "
                   f"({'; '.join(m['threads'])})", flush=True)
     print_table(f"{args.episodes} x {args.seconds:g} s of {args.planner} on "
                 f"{', '.join(args.areas)}, {usable_cores()} usable cores",
@@ -146,11 +153,13 @@ def main() -> None:
                  "load before"], rows)
     wall = {s: statistics.mean(m["wall_s"] for m in ms) for s, ms in measured.items()}
     ratios = {
-        "2 vs 1 worker, limited (flybo serve now)": wall[1, True] / wall[2, True],
-        "2 vs 1 worker, no limit (before)": wall[1, False] / wall[2, False],
-        "2 limited vs 1 without limit": wall[1, False] / wall[2, True],
-        "2 workers: limited over no limit": wall[2, False] / wall[2, True],
-        "1 worker: limited over no limit": wall[1, False] / wall[1, True],
+        "2 vs 1 worker, limited (flybo serve now)": wall[1, "shared"] / wall[2, "shared"],
+        "2 vs 1 worker, no limit (before)": wall[1, "none"] / wall[2, "none"],
+        "2 limited vs 1 without limit": wall[1, "none"] / wall[2, "shared"],
+        "2 limited vs 1 on one thread": wall[1, "one"] / wall[2, "shared"],
+        "2 workers: limited over no limit": wall[2, "none"] / wall[2, "shared"],
+        "1 worker: limited over no limit": wall[1, "none"] / wall[1, "shared"],
+        "1 worker: one thread over limited": wall[1, "shared"] / wall[1, "one"],
     }
     print_table("speedup (mean wall times; > 1: the first set-up is faster)",
                 ["comparison", "speedup"], [[k, f"{v:.2f}x"] for k, v in ratios.items()])
