@@ -13,8 +13,11 @@ default 1.75). The 5 runs of an area differ in seed only, so one run's CPU time 
 A planner with areas not yet flown gets a lower bound, marked as such.
 
 Run: `.venv/bin/python benchmarks/suite_estimate.py [--benchmark V] [--runs 5]
-[--busy-cores 1.75]` after (or while) `benchmarks/crash_sweep.py` runs. Target: the 7-planner
-suite under 3 hours (`docs/PERFORMANCE.md`).
+[--busy-cores 1.75] [--log RUNS.jsonl]` after (or while) `benchmarks/crash_sweep.py` runs
+(`--log`: a kept sweep's runs, `benchmarks/records/`, in place of the sweep's own log). The
+total counts one version per planner name, the one the name stands for (an older version
+flown beside it is listed, not counted). Target: the 7-planner suite under 3 hours
+(`docs/PERFORMANCE.md`).
 """
 
 from __future__ import annotations
@@ -47,11 +50,26 @@ def estimate(runs: list[dict[str, Any]], areas: list[str], *, repeats: int,
     return rows
 
 
+def _current(planner_id: str) -> str:
+    """The id the name of `planner_id` stands for now (itself for a name no longer registered,
+    such as a third-party planner not installed here)."""
+    from planners.registry import UnknownPlannerError, parse_id, spec
+
+    try:
+        return spec(parse_id(planner_id)[0]).id
+    except (UnknownPlannerError, ValueError):
+        return planner_id
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--benchmark", default=None, help="benchmark version (default: the tree's)")
     parser.add_argument("--runs", type=int, default=5, help="runs per area in the suite")
     parser.add_argument("--busy-cores", type=float, default=1.75)
+    parser.add_argument("--log", type=Path, default=LOG,
+                        help="the crash sweep's runs (default: its log under benchmarks/results)")
+    parser.add_argument("--name", default="suite_estimate",
+                        help="the JSON's name under benchmarks/results/")
     args = parser.parse_args()
     if args.runs < 1 or not args.busy_cores > 0:
         raise SystemExit("--runs must be at least 1 and --busy-cores positive")
@@ -59,10 +77,12 @@ def main() -> None:
     from flybo.versions import benchmark_version
 
     version = args.benchmark or benchmark_version()
-    runs = stored_runs(version)
+    if not args.log.is_file():
+        raise SystemExit(f"{args.log}: no such file")
+    runs = stored_runs(version, args.log)
     rows = estimate(runs, area_names(), repeats=args.runs, busy_cores=args.busy_cores)
     if not rows:
-        raise SystemExit(f"no run of benchmark {version} in {LOG} records its CPU time: run "
+        raise SystemExit(f"no run of benchmark {version} in {args.log} records its CPU time: run "
                          "benchmarks/crash_sweep.py first")
     print_table(f"Suite wall time estimated from CPU time (benchmark {version}, {args.runs} runs "
                 f"per area, {args.busy_cores} busy cores)",
@@ -70,11 +90,14 @@ def main() -> None:
                 [[r["planner"], f"{r['areas']}/{r['of']}", f"{r['cpu_s']:.0f}",
                   f"{r['wall_min']:.1f}" + ("" if r["complete"] else " (lower bound)")]
                  for r in rows])
-    total = sum(r["wall_min"] for r in rows)
-    complete = all(r["complete"] for r in rows)
-    print(f"\nall planners: {total / 60:.2f} h{'' if complete else ' (lower bound)'}")
-    path = write_json("suite_estimate", {"benchmark": version, "runs": args.runs,
+    counted = [r for r in rows if r["planner"] == _current(r["planner"])]
+    total = sum(r["wall_min"] for r in counted)
+    complete = all(r["complete"] for r in counted)
+    print(f"\nall planners ({', '.join(r['planner'] for r in counted)}): {total / 60:.2f} h"
+          f"{'' if complete else ' (lower bound)'}")
+    path = write_json(args.name, {"benchmark": version, "runs": args.runs,
                                          "busy_cores": args.busy_cores, "planners": rows,
+                                         "counted": [r["planner"] for r in counted],
                                          "total_h": total / 60, "complete": complete})
     print(f"wrote {path}")
 

@@ -1,0 +1,59 @@
+"""benchmarks/suite_estimate.py: the suite's estimate from a kept sweep's runs, counting the
+version each planner name stands for, and a missing log refused."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from areas import area_names
+from benchmarks.suite_estimate import _current, estimate
+
+ROOT = Path(__file__).resolve().parents[1]
+SCRIPT = ROOT / "benchmarks" / "suite_estimate.py"
+
+
+def _runs(planner: str, cpu_s: float) -> list[dict[str, object]]:
+    return [{"planner": planner, "area": area, "seed": 0, "benchmark": "test-1", "cpu_s": cpu_s}
+            for area in area_names()]
+
+
+def test_the_estimate_is_cpu_time_times_runs_over_busy_cores() -> None:
+    runs = [*_runs("classic-v2", 10.0)[:3], {**_runs("classic-v2", 99.0)[0], "seed": 1}]
+    (row,) = estimate(runs, area_names(), repeats=5, busy_cores=2.0)
+    assert row["planner"] == "classic-v2" and row["areas"] == 3
+    assert row["cpu_s"] == pytest.approx(30.0)  # seed 1 stands for no area
+    assert row["wall_min"] == pytest.approx(30.0 * 5 / 2.0 / 60)
+    assert not row["complete"] and len(row["missing"]) == len(area_names()) - 3
+
+
+def test_a_name_counts_the_version_it_stands_for() -> None:
+    assert _current("classic-v2") == _current("classic")
+    assert _current("classic-v1") != "classic-v1"
+    assert _current("no-such-planner-v1") == "no-such-planner-v1"
+
+
+def test_a_kept_log_is_read_and_an_older_version_listed_not_counted(tmp_path: Path) -> None:
+    log = tmp_path / "runs.jsonl"
+    current = _current("classic")
+    older = "classic-v1"
+    lines = _runs(current, 6.0) + _runs(older, 1000.0)
+    log.write_text("".join(json.dumps(r) + "\n" for r in lines))
+    command = [sys.executable, str(SCRIPT), "--benchmark", "test-1", "--log", str(log),
+               "--busy-cores", "1", "--name", "suite_estimate_test"]
+    done = subprocess.run(command, capture_output=True, text=True, cwd=tmp_path, check=False)
+    assert done.returncode == 0, done.stderr
+    assert older in done.stdout
+    # 11 areas x 6 s x 5 runs / 1 core = 330 s: the older version's 1,000 s runs are not counted.
+    assert f"all planners ({current}): 0.09 h" in done.stdout
+
+
+def test_a_missing_log_is_refused(tmp_path: Path) -> None:
+    done = subprocess.run([sys.executable, str(SCRIPT), "--log", str(tmp_path / "none.jsonl")],
+                          capture_output=True, text=True, check=False)
+    assert done.returncode != 0
+    assert "none.jsonl: no such file" in done.stderr
