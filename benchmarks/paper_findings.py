@@ -3,7 +3,8 @@
     .venv/bin/python benchmarks/paper_findings.py [--planners classic rapid ...] \
         [--areas maze warehouse ...] [--runs 5 | --seeds 0 3] [--preset default] \
         [--seconds S] [--jobs 2] [--name NAME] [--load A.json B.json] [--bootstrap 1000]
-    .venv/bin/python benchmarks/paper_findings.py --sweep benchmarks/results/crash_sweep.jsonl
+    .venv/bin/python benchmarks/paper_findings.py --sweep benchmarks/results/crash_sweep.jsonl \
+        [benchmarks/records/crash_sweep-....jsonl ...]
 
 Flies every planner x area x seed to the area's plateau time (or `--seconds`), `--jobs` runs at
 a time in separate processes, then prints per area the relative coverage (the leaderboard's:
@@ -12,7 +13,7 @@ paper's, the Kendall tau between our average ranks and the paper's (both ranked 
 and areas flown here), how far each tau moves when every cell's runs are drawn again with
 replacement (`--bootstrap`, where cells hold several seeds), and each finding of the paper's
 sections 4.1-4.3 marked held, not held or not measured. `--load` reads the runs of earlier JSONs
-instead of flying (subsets flown apart are compared together); `--sweep` reads a crash sweep's
+instead of flying (subsets flown apart are compared together); `--sweep` reads crash sweeps'
 runs (a cell's seeds averaged; no RMSE). Writes `benchmarks/results/paper_findings.json` (or
 `--name`).
 """
@@ -22,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -110,14 +112,16 @@ def our_cells(runs: list[dict[str, Any]]) -> Cells:
     return cells
 
 
-def sweep_runs(path: Path, benchmark: str | None) -> list[dict[str, Any]]:
-    """The runs of a crash sweep's log (`benchmarks/crash_sweep.py`) that this comparison can
-    use: benchmark `benchmark` (default: this tree's), the paper's areas, and per planner
-    family of the paper the version its name resolves to now (the leaderboard's default)."""
+def sweep_runs(paths: Path | Sequence[Path], benchmark: str | None) -> list[dict[str, Any]]:
+    """The runs of one or more crash sweeps' logs (`benchmarks/crash_sweep.py`) that this
+    comparison can use: benchmark `benchmark` (default: this tree's), the paper's areas, and per
+    planner family of the paper the version its name resolves to now (the leaderboard's
+    default). A run found in several logs (same planner, area, seed and seconds) counts once."""
     from benchmarks.crash_sweep import stored_runs
     from flybo.versions import benchmark_version
     from planners.registry import UnknownPlannerError, spec
 
+    logs = [paths] if isinstance(paths, Path) else list(paths)
     wanted = benchmark or benchmark_version()
     latest = {}
     for name in PLANNERS:
@@ -125,12 +129,15 @@ def sweep_runs(path: Path, benchmark: str | None) -> list[dict[str, Any]]:
             latest[name] = spec(name).id
         except UnknownPlannerError:
             continue
-    chosen = [r for r in stored_runs(wanted, path) if r["area"] in AREAS
-              and r["planner"] == latest.get(family(r["planner"]))]
+    chosen: dict[tuple[Any, ...], dict[str, Any]] = {}
+    for log in logs:
+        for r in stored_runs(wanted, log):
+            if r["area"] in AREAS and r["planner"] == latest.get(family(r["planner"])):
+                chosen.setdefault((r["planner"], r["area"], r["seed"], r.get("seconds")), r)
     if not chosen:
-        raise SystemExit(f"{path}: no run of benchmark {wanted} by "
+        raise SystemExit(f"{', '.join(map(str, logs))}: no run of benchmark {wanted} by "
                          f"{', '.join(latest.values())} on the paper's areas")
-    return chosen
+    return list(chosen.values())
 
 
 def paper_cells(planners: list[str], areas: list[str]) -> Cells:
@@ -257,9 +264,10 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=1, help="runs flown at a time")
     parser.add_argument("--load", type=Path, nargs="+", default=None,
                         help="take the runs from these JSONs (of this script) instead of flying")
-    parser.add_argument("--sweep", type=Path, default=None,
-                        help="take the runs from a crash sweep's log (crash_sweep.jsonl): "
-                             "coverage and F-score only, no RMSE")
+    parser.add_argument("--sweep", type=Path, nargs="+", default=None,
+                        help="take the runs from crash sweeps' logs (crash_sweep.jsonl, or "
+                             "kept ones under benchmarks/records): coverage and F-score only, "
+                             "no RMSE")
     parser.add_argument("--benchmark", default=None,
                         help="with --sweep: the benchmark version whose runs to take "
                              "(default: this tree's)")

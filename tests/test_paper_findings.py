@@ -155,3 +155,20 @@ def test_tau_intervals_are_narrow_when_seeds_agree_and_wide_when_they_do_not() -
     again = tau_intervals(_paper_ordered_runs(30.0, 5), 200, np.random.default_rng(0))
     assert again == noisy
     assert tau_intervals(_paper_ordered_runs(30.0, 1), 200, np.random.default_rng(0)) == {}
+
+
+def test_several_sweep_logs_are_read_and_a_run_in_two_counts_once(tmp_path: Path) -> None:
+    from flybo.versions import benchmark_version
+    from planners.registry import spec
+
+    here = benchmark_version()
+    latest = {name: spec(name).id for name in PLANNERS}
+    first = [_sweep_row(latest[p], "maze", 0.9, 0.8, here) for p in PLANNERS]
+    second = [_sweep_row(latest[p], "warehouse", 0.8, 0.7, here) for p in PLANNERS]
+    a, b = tmp_path / "a.jsonl", tmp_path / "b.jsonl"
+    a.write_text("".join(json.dumps(r) + "\n" for r in first))
+    b.write_text("".join(json.dumps(r) + "\n" for r in [*second, first[0]]))
+    runs = sweep_runs([a, b], None)
+    assert sorted(map(json.dumps, runs)) == sorted(map(json.dumps, first + second))
+    with pytest.raises(SystemExit, match=r"a\.jsonl: no run of benchmark 2000\.01-1"):
+        sweep_runs([a], "2000.01-1")
