@@ -14,8 +14,8 @@ and areas flown here), how far each tau moves when every cell's runs are drawn a
 replacement (`--bootstrap`, where cells hold several seeds), and each finding of the paper's
 sections 4.1-4.3 marked held, not held or not measured. `--load` reads the runs of earlier JSONs
 instead of flying (subsets flown apart are compared together); `--sweep` reads crash sweeps'
-runs (a cell's seeds averaged; no RMSE). Writes `benchmarks/results/paper_findings.json` (or
-`--name`).
+runs (a cell's seeds averaged; no RMSE), those on `--areas` and `--seeds` where given. Writes
+`benchmarks/results/paper_findings.json` (or `--name`).
 """
 
 from __future__ import annotations
@@ -255,9 +255,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--planners", nargs="+", default=list(PLANNERS),
                         help="ids or names (a name is its default version), one per family")
-    parser.add_argument("--areas", nargs="+", default=list(AREAS))
+    parser.add_argument("--areas", nargs="+", default=list(AREAS),
+                        help="the areas to fly, or to take from --sweep")
     parser.add_argument("--runs", type=int, default=1, help="seeds 0 .. runs-1")
-    parser.add_argument("--seeds", type=int, nargs="+", default=None)
+    parser.add_argument("--seeds", type=int, nargs="+", default=None,
+                        help="the seeds to fly, or to take from --sweep (default: all there)")
     parser.add_argument("--preset", default="default")
     parser.add_argument("--seconds", type=float, default=None,
                         help="simulated seconds (default: each area's plateau time)")
@@ -279,7 +281,10 @@ def main() -> None:
     if args.load:
         runs = [r for path in args.load for r in json.loads(path.read_text())["runs"]]
     elif args.sweep:
-        runs = sweep_runs(args.sweep, args.benchmark)
+        runs = [r for r in sweep_runs(args.sweep, args.benchmark) if r["area"] in args.areas
+                and (args.seeds is None or r["seed"] in args.seeds)]
+        if not runs:
+            raise SystemExit("no run of the sweeps on the areas and seeds asked for")
     else:
         runs = fly_all(args)
     summary = compare(runs)

@@ -172,3 +172,32 @@ def test_several_sweep_logs_are_read_and_a_run_in_two_counts_once(tmp_path: Path
     assert sorted(map(json.dumps, runs)) == sorted(map(json.dumps, first + second))
     with pytest.raises(SystemExit, match=r"a\.jsonl: no run of benchmark 2000\.01-1"):
         sweep_runs([a], "2000.01-1")
+
+
+def test_the_sweeps_runs_are_taken_on_the_areas_and_seeds_asked_for(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    from flybo.versions import benchmark_version
+    from planners.registry import spec
+
+    here = benchmark_version()
+    latest = {name: spec(name).id for name in PLANNERS}
+    rows = [{**_sweep_row(latest[p], area, 0.9, 0.8, here), "seed": seed}
+            for p in PLANNERS for area in ("maze", "warehouse") for seed in (0, 1)]
+    log = tmp_path / "runs.jsonl"
+    log.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run(
+        [sys.executable, str(root / "benchmarks" / "paper_findings.py"), "--sweep", str(log),
+         "--areas", "maze", "--seeds", "1", "--bootstrap", "0", "--name", "paper_findings_test"],
+        capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    written = json.loads((root / "benchmarks" / "results" / "paper_findings_test.json").read_text())
+    assert {(r["area"], r["seed"]) for r in written["runs"]} == {("maze", 1)}
+    assert len(written["runs"]) == len(PLANNERS)
+    refused = subprocess.run(
+        [sys.executable, str(root / "benchmarks" / "paper_findings.py"), "--sweep", str(log),
+         "--seeds", "7", "--bootstrap", "0", "--name", "paper_findings_test"],
+        capture_output=True, text=True, check=False)
+    assert refused.returncode != 0 and "no run of the sweeps" in refused.stderr
