@@ -15,7 +15,8 @@ is not flown again: a stopped sweep resumes where it stopped.
 Each run's recording is kept in `--recordings` (default `benchmarks/results/crash_sweep/`):
 `--rescore` recomputes every stored run's coverage from its recording's final map against the
 area's current ground truth, so a change of the observable set does not need the flights again.
-Per run: how it ended, collisions, safety stops, coverage, F-score, wall time.
+Per run: how it ended, collisions, safety stops, coverage, F-score, wall time (printed); the
+log also keeps the surface's precision, recall and RMSE, peak memory and CPU time.
 """
 
 from __future__ import annotations
@@ -85,7 +86,9 @@ def _run(planner: str, area_name: str, seed: int, seconds: float | None, benchma
         "planner": planner_id, "area": area_name, "seed": seed, "seconds": seconds,
         "benchmark": benchmark, "status": result.status.value, "reason": result.reason,
         "simulated_until": result.simulated_until, "coverage": result.coverage,
-        "fscore": result.surface.fscore, "collisions": result.collisions,
+        "fscore": result.surface.fscore, "precision": result.surface.precision,
+        "recall": result.surface.recall, "rmse_m": result.surface.rmse_m,
+        "collisions": result.collisions,
         "safety_stops": result.safety_stops, "path_length_m": result.path_length_m,
         "wall_s": time.perf_counter() - wall0, "recording": recording.name,
         "iterations": result.iterations,

@@ -87,7 +87,8 @@ def _explored(run: dict[str, Any]) -> float:
 
 def our_cells(runs: list[dict[str, Any]]) -> Cells:
     """Means per planner family and area; relative coverage as the leaderboard's. A score
-    that some run of a cell lacks (a crash sweep stores no RMSE or recall) is left out."""
+    that some run of a cell lacks (crash sweeps logged before 2026-12-06 store no RMSE or
+    recall) is left out."""
     groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for run in runs:
         groups.setdefault((family(run["planner"]), run["area"]), []).append(run)
