@@ -14,7 +14,8 @@ and areas flown here), how far each tau moves when every cell's runs are drawn a
 replacement (`--bootstrap`, where cells hold several seeds), and each finding of the paper's
 sections 4.1-4.3 marked held, not held or not measured. `--load` reads the runs of earlier JSONs
 instead of flying (subsets flown apart are compared together); `--sweep` reads crash sweeps'
-runs (a cell's seeds averaged; no RMSE), those on `--areas` and `--seeds` where given. Writes
+runs (a cell's seeds averaged; RMSE and recall where the sweep logged them), those on
+`--areas` and `--seeds` where given. Writes
 `benchmarks/results/paper_findings.json` (or `--name`).
 """
 
