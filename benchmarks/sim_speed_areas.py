@@ -8,6 +8,10 @@ window weighs the run's one-time costs (building the physics scene, the start's 
 the final mesh and its scoring) more than a whole run does, and a whole run plans over a larger
 map later on.
 
+The title names the machine's speed factor (`sim.reference_speed`: the reference workload's
+time on the reference machine over its time here), so that tables measured on machines of
+different speed can be told apart; the stages do not all scale with it.
+
 One episode per area in this process (pin it to one core: Open3D may otherwise use both), after
 a 5 s episode on MAZE that loads (or compiles) the numba kernels. The per-frame costs are per
 fused camera frame; "planner" is the planning time per simulated second, the rest of the wall
@@ -26,9 +30,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from areas import area_names, load_area, load_ground_truth
 from benchmarks.common import peak_rss_mib, print_table, write_json
+from flybo.versions import benchmark_version
 from planners.registry import make, spec
 from sim.config import preset
 from sim.episode import run_episode
+from sim.reference_speed import REFERENCE_CPU_S, speed_factor
 
 STAGES = ("render", "occupancy", "tsdf", "physics", "metrics", "checks", "recording")
 
@@ -80,8 +86,12 @@ def main() -> None:
         row = measure(name, args.planner, args.preset, seconds, args.seed)
         rows.append(row)
         print(f"{name}: {row['realtime_factor']:.1f} simulated s per wall s", flush=True)
+    # Figures from machines of different speed differ by tens of percent: name this one's.
+    factor = speed_factor()
     print_table(
-        f"{spec(args.planner).id}, preset {args.preset}, {args.seconds} simulated s per area",
+        f"{spec(args.planner).id}, preset {args.preset}, {args.seconds} simulated s per area, "
+        f"machine speed factor {factor:.2f} (reference workload {REFERENCE_CPU_S / factor:.3f} s "
+        f"against {REFERENCE_CPU_S:.3f})",
         ["area", "faces", "grid voxels", "sim s", "sim s / wall s",
          *(f"{k} ms/frame" for k in STAGES), "planning s", "other s", "wall s"],
         [[r["area"], r["faces"], r["grid_voxels"], f"{r['simulated_s']:.0f}",
@@ -91,8 +101,10 @@ def main() -> None:
     )
     path = write_json(args.out, {
         "command": "python benchmarks/sim_speed_areas.py " + " ".join(sys.argv[1:]),
-        "planner": spec(args.planner).id, "preset": args.preset, "seconds": args.seconds,
-        "seed": args.seed, "peak_rss_mib": peak_rss_mib(), "areas": rows,
+        "benchmark": benchmark_version(), "planner": spec(args.planner).id,
+        "preset": args.preset, "seconds": args.seconds,
+        "seed": args.seed, "speed_factor": factor, "peak_rss_mib": peak_rss_mib(),
+        "areas": rows,
     })
     print(f"\nwrote {path}")
 
