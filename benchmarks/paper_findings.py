@@ -15,7 +15,8 @@ replacement (`--bootstrap`, where cells hold several seeds), and each finding of
 sections 4.1-4.3 marked held, not held or not measured. `--load` reads the runs of earlier JSONs
 instead of flying (subsets flown apart are compared together); `--sweep` reads crash sweeps'
 runs (a cell's seeds averaged; RMSE and recall where the sweep logged them), those on
-`--areas` and `--seeds` where given. Writes
+`--areas` and `--seeds` where given; both together take each planner and area from one of
+them (the indoor areas from a sweep and the large ones flown with another camera, say). Writes
 `benchmarks/results/paper_findings.json` (or `--name`).
 """
 
@@ -267,7 +268,8 @@ def main() -> None:
                         help="simulated seconds (default: each area's plateau time)")
     parser.add_argument("--jobs", type=int, default=1, help="runs flown at a time")
     parser.add_argument("--load", type=Path, nargs="+", default=None,
-                        help="take the runs from these JSONs (of this script) instead of flying")
+                        help="take the runs from these JSONs (of this script, or of "
+                             "sensor_range.py) instead of flying; with --sweep, the runs of both")
     parser.add_argument("--sweep", type=Path, nargs="+", default=None,
                         help="take the runs from crash sweeps' logs (crash_sweep.jsonl, or "
                              "kept ones under benchmarks/records): coverage and F-score only, "
@@ -280,15 +282,7 @@ def main() -> None:
     parser.add_argument("--name", default="paper_findings",
                         help="the JSON's name under benchmarks/results/")
     args = parser.parse_args()
-    if args.load:
-        runs = [r for path in args.load for r in json.loads(path.read_text())["runs"]]
-    elif args.sweep:
-        runs = [r for r in sweep_runs(args.sweep, args.benchmark) if r["area"] in args.areas
-                and (args.seeds is None or r["seed"] in args.seeds)]
-        if not runs:
-            raise SystemExit("no run of the sweeps on the areas and seeds asked for")
-    else:
-        runs = fly_all(args)
+    runs = gathered_runs(args) if args.load or args.sweep else fly_all(args)
     summary = compare(runs)
     if args.bootstrap > 0:
         # A fixed seed: the same runs give the same intervals.
@@ -298,6 +292,27 @@ def main() -> None:
         "command": "python benchmarks/paper_findings.py " + " ".join(sys.argv[1:]),
         "preset": args.preset, "runs": runs, **summary})
     print(f"wrote {path}")
+
+
+def gathered_runs(args: argparse.Namespace) -> list[dict[str, Any]]:
+    """The runs of `--load` and `--sweep` on `--areas` and `--seeds`. Given both, each planner
+    and area must come from one of them: a cell's mean never mixes runs flown under different
+    settings (a `--load` JSON may hold runs with another camera, `benchmarks/sensor_range.py`)."""
+    def wanted(run: dict[str, Any]) -> bool:
+        return run["area"] in args.areas and (args.seeds is None or run["seed"] in args.seeds)
+
+    loaded = [r for path in args.load or [] for r in json.loads(path.read_text())["runs"]
+              if wanted(r)]
+    swept = [r for r in sweep_runs(args.sweep, args.benchmark) if wanted(r)] if args.sweep else []
+    both = ({(family(r["planner"]), r["area"]) for r in loaded}
+            & {(family(r["planner"]), r["area"]) for r in swept})
+    if both:
+        cells = ", ".join(f"{p} on {a}" for p, a in sorted(both))
+        raise SystemExit(f"--load and --sweep both hold runs of {cells}: take each planner and "
+                         "area from one of them (--areas selects)")
+    if not loaded and not swept:
+        raise SystemExit("no run of the sweeps or loaded JSONs on the areas and seeds asked for")
+    return loaded + swept
 
 
 def fly_all(args: argparse.Namespace) -> list[dict[str, Any]]:
