@@ -269,7 +269,8 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=1, help="runs flown at a time")
     parser.add_argument("--load", type=Path, nargs="+", default=None,
                         help="take the runs from these JSONs (of this script, or of "
-                             "sensor_range.py) instead of flying; with --sweep, the runs of both")
+                             "sensor_range.py) or JSON-lines records instead of flying; with "
+                             "--sweep, the runs of both")
     parser.add_argument("--sweep", type=Path, nargs="+", default=None,
                         help="take the runs from crash sweeps' logs (crash_sweep.jsonl, or "
                              "kept ones under benchmarks/records): coverage and F-score only, "
@@ -294,6 +295,22 @@ def main() -> None:
     print(f"wrote {path}")
 
 
+def loaded_runs(path: Path) -> list[dict[str, Any]]:
+    """The runs of a JSON with a "runs" list (this script's, `sensor_range.py`'s), or of a
+    JSON-lines file with one run per line (the records under `benchmarks/records/`)."""
+    text = path.read_text()
+    if path.suffix == ".jsonl":
+        return [json.loads(line) for line in text.splitlines() if line.strip()]
+    runs: list[dict[str, Any]] = json.loads(text)["runs"]
+    return runs
+
+
+def _tree_version() -> str:
+    from flybo.versions import benchmark_version
+
+    return benchmark_version()
+
+
 def gathered_runs(args: argparse.Namespace) -> list[dict[str, Any]]:
     """The runs of `--load` and `--sweep` on `--areas` and `--seeds`. Given both, each planner
     and area must come from one of them: a cell's mean never mixes runs flown under different
@@ -301,8 +318,12 @@ def gathered_runs(args: argparse.Namespace) -> list[dict[str, Any]]:
     def wanted(run: dict[str, Any]) -> bool:
         return run["area"] in args.areas and (args.seeds is None or run["seed"] in args.seeds)
 
-    loaded = [r for path in args.load or [] for r in json.loads(path.read_text())["runs"]
-              if wanted(r)]
+    loaded = [r for path in args.load or [] for r in loaded_runs(path) if wanted(r)]
+    version = args.benchmark or _tree_version()
+    other = sorted({r["benchmark"] for r in loaded if r.get("benchmark", version) != version})
+    if other:
+        raise SystemExit(f"--load holds runs of benchmark {', '.join(other)}, not {version} "
+                         "(--benchmark names the version to compare)")
     swept = [r for r in sweep_runs(args.sweep, args.benchmark) if wanted(r)] if args.sweep else []
     both = ({(family(r["planner"]), r["area"]) for r in loaded}
             & {(family(r["planner"]), r["area"]) for r in swept})

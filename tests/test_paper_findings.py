@@ -237,3 +237,26 @@ def test_loaded_and_swept_runs_are_combined_one_source_per_cell(tmp_path: Path) 
     assert len(runs) == 2 * len(PLANNERS)
     summary = compare(runs)
     assert set(summary["areas"]) == {"maze", "warehouse"}
+
+
+def test_records_are_loaded_and_another_benchmark_version_refused(tmp_path: Path) -> None:
+    import argparse
+
+    from benchmarks.paper_findings import gathered_runs, loaded_runs
+    from flybo.versions import benchmark_version
+    from planners.registry import spec
+
+    here = benchmark_version()
+    runs = [{"benchmark": here, "planner": spec(p).id, "area": "powerplant", "seed": 0,
+             "coverage": 0.99, "fscore": 0.7} for p in PLANNERS]
+    record = tmp_path / "record.jsonl"
+    record.write_text("".join(json.dumps(r) + "\n" for r in runs) + "\n")
+    assert loaded_runs(record) == runs
+
+    def args(benchmark: str | None) -> argparse.Namespace:
+        return argparse.Namespace(load=[record], sweep=None, benchmark=benchmark,
+                                  areas=list(AREAS), seeds=None)
+
+    assert gathered_runs(args(None)) == runs
+    with pytest.raises(SystemExit, match=r"benchmark .* not 2000\.01-1"):
+        gathered_runs(args("2000.01-1"))
