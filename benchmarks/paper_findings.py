@@ -15,8 +15,8 @@ replacement (`--bootstrap`, where cells hold several seeds), and each finding of
 sections 4.1-4.3 marked held, not held or not measured. `--load` reads the runs of earlier JSONs
 instead of flying (subsets flown apart are compared together); `--sweep` reads crash sweeps'
 runs (a cell's seeds averaged; RMSE and recall where the sweep logged them), those on
-`--areas` and `--seeds` where given; both together take each planner and area from one of
-them (the indoor areas from a sweep and the large ones flown with another camera, say). Writes
+`--areas` and `--seeds` where given; given both, the loaded runs of a planner and area replace
+the sweep's (the large areas flown with another camera, say). Writes
 `benchmarks/results/paper_findings.json` (or `--name`).
 """
 
@@ -270,7 +270,7 @@ def main() -> None:
     parser.add_argument("--load", type=Path, nargs="+", default=None,
                         help="take the runs from these JSONs (of this script, or of "
                              "sensor_range.py) or JSON-lines records instead of flying; with "
-                             "--sweep, the runs of both")
+                             "--sweep, in place of the sweep's runs of the same planner and area")
     parser.add_argument("--sweep", type=Path, nargs="+", default=None,
                         help="take the runs from crash sweeps' logs (crash_sweep.jsonl, or "
                              "kept ones under benchmarks/records): coverage and F-score only, "
@@ -312,9 +312,10 @@ def _tree_version() -> str:
 
 
 def gathered_runs(args: argparse.Namespace) -> list[dict[str, Any]]:
-    """The runs of `--load` and `--sweep` on `--areas` and `--seeds`. Given both, each planner
-    and area must come from one of them: a cell's mean never mixes runs flown under different
-    settings (a `--load` JSON may hold runs with another camera, `benchmarks/sensor_range.py`)."""
+    """The runs of `--load` and `--sweep` on `--areas` and `--seeds`. Given both, the loaded
+    runs of a planner and area replace the sweep's of that planner and area, so that a cell's
+    mean never mixes runs flown under different settings (a `--load` record may hold runs with
+    another camera, `benchmarks/sensor_range.py`); the cells replaced are printed."""
     def wanted(run: dict[str, Any]) -> bool:
         return run["area"] in args.areas and (args.seeds is None or run["seed"] in args.seeds)
 
@@ -325,12 +326,12 @@ def gathered_runs(args: argparse.Namespace) -> list[dict[str, Any]]:
         raise SystemExit(f"--load holds runs of benchmark {', '.join(other)}, not {version} "
                          "(--benchmark names the version to compare)")
     swept = [r for r in sweep_runs(args.sweep, args.benchmark) if wanted(r)] if args.sweep else []
-    both = ({(family(r["planner"]), r["area"]) for r in loaded}
-            & {(family(r["planner"]), r["area"]) for r in swept})
-    if both:
-        cells = ", ".join(f"{p} on {a}" for p, a in sorted(both))
-        raise SystemExit(f"--load and --sweep both hold runs of {cells}: take each planner and "
-                         "area from one of them (--areas selects)")
+    replaced = ({(family(r["planner"]), r["area"]) for r in loaded}
+                & {(family(r["planner"]), r["area"]) for r in swept})
+    if replaced:
+        print("runs from --load in place of the sweep's: "
+              + ", ".join(f"{p} on {a}" for p, a in sorted(replaced)), flush=True)
+        swept = [r for r in swept if (family(r["planner"]), r["area"]) not in replaced]
     if not loaded and not swept:
         raise SystemExit("no run of the sweeps or loaded JSONs on the areas and seeds asked for")
     return loaded + swept

@@ -203,7 +203,7 @@ def test_the_sweeps_runs_are_taken_on_the_areas_and_seeds_asked_for(tmp_path: Pa
     assert refused.returncode != 0 and "no run of the sweeps" in refused.stderr
 
 
-def test_loaded_and_swept_runs_are_combined_one_source_per_cell(tmp_path: Path) -> None:
+def test_loaded_runs_replace_the_sweep_s_of_their_planner_and_area(tmp_path: Path) -> None:
     import argparse
 
     from benchmarks.paper_findings import gathered_runs
@@ -212,29 +212,22 @@ def test_loaded_and_swept_runs_are_combined_one_source_per_cell(tmp_path: Path) 
 
     here = benchmark_version()
     latest = {name: spec(name).id for name in PLANNERS}
-    swept = [_sweep_row(latest[p], area, 0.9, 0.8, here) for p in PLANNERS
-             for area in ("maze", "warehouse")]
+    swept = [{**_sweep_row(latest[p], area, 0.9, 0.8, here), "seed": seed} for p in PLANNERS
+             for area in ("maze", "warehouse") for seed in (0, 1)]
     log = tmp_path / "runs.jsonl"
     log.write_text("".join(json.dumps(r) + "\n" for r in swept))
-    # Runs flown with another camera (as sensor_range.py writes them), on WAREHOUSE only.
+    # Runs flown with another camera (as sensor_range.py writes them), on WAREHOUSE, one seed.
     other = [{"planner": latest[p], "area": "warehouse", "seed": 0, "coverage": 0.99,
               "fscore": 0.7, "camera_range_m": 7.0} for p in PLANNERS]
     loaded = tmp_path / "camera.json"
     loaded.write_text(json.dumps({"runs": other}))
-
-    def args(areas: list[str]) -> argparse.Namespace:
-        return argparse.Namespace(load=[loaded], sweep=[log], benchmark=None, areas=areas,
-                                  seeds=None)
-
-    with pytest.raises(SystemExit, match="both hold runs of aep on warehouse"):
-        gathered_runs(args(["maze", "warehouse"]))
-    # The sweep's MAZE and the loaded WAREHOUSE: asked for through --areas on the loaded side.
-    loaded.write_text(json.dumps({"runs": [*other, {**other[0], "area": "powerplant"}]}))
-    log.write_text("".join(json.dumps(r) + "\n" for r in swept if r["area"] == "maze"))
-    runs = gathered_runs(args(["maze", "warehouse"]))
-    assert {(r["area"], "camera_range_m" in r) for r in runs} == {("maze", False),
-                                                                 ("warehouse", True)}
-    assert len(runs) == 2 * len(PLANNERS)
+    args = argparse.Namespace(load=[loaded], sweep=[log], benchmark=None,
+                              areas=["maze", "warehouse"], seeds=None)
+    runs = gathered_runs(args)
+    # WAREHOUSE's cells hold the loaded run alone, not the sweep's two seeds beside it.
+    assert sorted((r["area"], r["seed"], "camera_range_m" in r) for r in runs) == sorted(
+        [("maze", s, False) for _ in PLANNERS for s in (0, 1)]
+        + [("warehouse", 0, True) for _ in PLANNERS])
     summary = compare(runs)
     assert set(summary["areas"]) == {"maze", "warehouse"}
 
