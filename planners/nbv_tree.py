@@ -28,7 +28,7 @@ import numpy.typing as npt
 
 from planners.gain import GainEvaluator
 from planners.lines import segment_clear_world
-from planners.rrt import Tree, extend
+from planners.rrt import Tree, extend, next_sample
 from sim.map_view import MapView
 
 FloatArray = npt.NDArray[np.float64]
@@ -133,10 +133,15 @@ def grow_tree(
             break
         if nodes >= settings.max_nodes:
             break
-        if failures > settings.max_failures_per_node * (nodes + 1):
+        limit = settings.max_failures_per_node * (nodes + 1)
+        # The samples `extend` surely fails on are skipped in compiled code, each counted as
+        # a failure; the generator ends as if they had been drawn one at a time.
+        sample, skipped = next_sample(rng, lo, hi, tree, view, settings.extension_m,
+                                      limit - failures)
+        failures += skipped
+        if sample is None:
             stalled = True
             break
-        sample = rng.uniform(lo, hi)
         before = tree.size
         node = extend(tree, view, sample, settings.extension_m,
                       rewire_radius_m=settings.rewire_radius_m)

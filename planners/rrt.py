@@ -7,10 +7,14 @@ flown as it is. Samples are drawn by the caller's seeded generator, uniformly in
 
 from __future__ import annotations
 
+import math
+
+import numba
 import numpy as np
 import numpy.typing as npt
 
 from planners.lines import segment_clear_world, segments_clear
+from planners.search import BoolGrid
 from sim.map_view import MapView
 
 FloatArray = npt.NDArray[np.float64]
@@ -175,3 +179,107 @@ def extend(
                 if int(n) not in ancestors:  # re-hanging an ancestor would close a cycle
                     tree.set_parent(int(n), node)
     return node
+
+
+# How near (voxel units, or relative) a quantity of the screen may lie to where `extend`'s
+# decision flips before the screen leaves the decision to `extend`: far above the last-bit
+# differences between a compiled sum and NumPy's (or BLAS's) on the same inputs.
+_SCREEN_MARGIN = 1e-6
+
+
+@numba.njit(cache=True, inline="always")
+def _near_integer(x: float) -> bool:
+    return abs(x - math.floor(x + 0.5)) < _SCREEN_MARGIN
+
+
+@numba.njit(cache=True)
+def _fails_surely(positions: FloatArray, sample: FloatArray, extension_m: float,
+                  origin: FloatArray, voxel_size: float, mask: BoolGrid) -> bool:
+    """Whether `extend` toward `sample` returns -1, decided only where no rounding can change
+    the answer (False: it may succeed, or the screen cannot tell)."""
+    # The nearest node, as `Tree.nearest` finds it; a near tie could go either way.
+    best, second, near = math.inf, math.inf, 0
+    for r in range(positions.shape[0]):
+        d0 = positions[r, 0] - sample[0]
+        d1 = positions[r, 1] - sample[1]
+        d2 = positions[r, 2] - sample[2]
+        q = (d0 * d0 + d1 * d1) + d2 * d2
+        if q < best:
+            best, second, near = q, best, r
+        elif q < second:
+            second = q
+    if second - best <= _SCREEN_MARGIN * (best + 1.0):
+        return False
+    # `steer`'s new point.
+    d = sample - positions[near]
+    length = math.sqrt((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2])
+    if abs(length - extension_m) <= _SCREEN_MARGIN * (extension_m + 1.0) or length < 1e-3:
+        return False
+    new = sample.copy() if length <= extension_m else positions[near] + d * (extension_m / length)
+    nx, ny, nz = mask.shape
+    b = (new - origin) / voxel_size
+    if not (_near_integer(b[0]) or _near_integer(b[1]) or _near_integer(b[2])):
+        i, j, k = math.floor(b[0]), math.floor(b[1]), math.floor(b[2])
+        if not (0 <= i < nx and 0 <= j < ny and 0 <= k < nz) or not mask[i, j, k]:
+            return True
+    # The edge, sampled as `sim.search_checks.segment_in_mask` samples it: any sample surely
+    # outside the mask fails it.
+    a = (positions[near] - origin) / voxel_size
+    span = math.sqrt(np.sum((b - a) ** 2)) * 4.0
+    if _near_integer(span):
+        return False
+    steps = max(1, math.ceil(span))
+    for s in range(steps + 1):
+        t = s / steps
+        x = a[0] + (b[0] - a[0]) * t
+        y = a[1] + (b[1] - a[1]) * t
+        z = a[2] + (b[2] - a[2]) * t
+        if _near_integer(x) or _near_integer(y) or _near_integer(z):
+            continue
+        i, j, k = math.floor(x), math.floor(y), math.floor(z)
+        if not (0 <= i < nx and 0 <= j < ny and 0 <= k < nz) or not mask[i, j, k]:
+            return True
+    return False
+
+
+@numba.njit(cache=True)
+def _first_maybe(positions: FloatArray, samples: FloatArray, extension_m: float,
+                 origin: FloatArray, voxel_size: float, mask: BoolGrid, count: int) -> int:
+    """The first of `samples[:count]` toward which `extend` may succeed; `count` if none."""
+    for n in range(count):
+        if not _fails_surely(positions, samples[n], extension_m, origin, voxel_size, mask):
+            return n
+    return count
+
+
+# Samples drawn ahead per screening call: most samples of a tree fail (about 11 in 12 on
+# OFFICES C), so a batch usually holds the next one worth a real `extend`.
+_SCREEN_BATCH = 32
+
+
+def next_sample(rng: np.random.Generator, lo: FloatArray, hi: FloatArray, tree: Tree,
+                view: MapView, extension_m: float, allowed_failures: int,
+                ) -> tuple[FloatArray | None, int]:
+    """The next of the samples `rng.uniform(lo, hi)` would draw one at a time toward which
+    `extend` may succeed, skipping those it surely fails on, and how many it skipped; None
+    once more than `allowed_failures` would have failed (the sample after them not drawn).
+
+    Leaves `rng` exactly as drawing the samples one at a time up to the returned one would:
+    a batch is drawn ahead, screened in compiled code, and the generator rewound to just past
+    the sample returned. `extend` must still be asked about that sample."""
+    mask = view.traversable
+    skipped = 0
+    while True:
+        state = rng.bit_generator.state
+        batch = rng.uniform(lo, hi, size=(_SCREEN_BATCH, 3))
+        count = min(_SCREEN_BATCH, allowed_failures - skipped + 1)
+        first = _first_maybe(tree.positions, batch, extension_m, view.origin, view.voxel_size,
+                             mask, count)
+        if first < count or count < _SCREEN_BATCH:
+            used = first + 1 if first < count else count
+            if used < _SCREEN_BATCH:
+                rng.bit_generator.state = state
+                rng.uniform(lo, hi, size=(used, 3))
+            skipped += first
+            return (batch[first].copy() if first < count else None), skipped
+        skipped += _SCREEN_BATCH

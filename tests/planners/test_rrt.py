@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from planners.rrt import Tree, extend, steer
+from planners.rrt import Tree, _fails_surely, extend, next_sample, steer
 from sim.occupancy import VoxelState
 from sim.search_checks import plan_is_clear
 from tests.planners.conftest import stack_from_state
@@ -84,3 +84,78 @@ def test_extend_refuses_unreachable_samples() -> None:
     # Straight through the first wall.
     assert extend(tree, view, np.array([2.4, 0.8, 1.0]), 1.0) == -1
     assert tree.size == 1
+
+
+def _grow_one_at_a_time(view, rng, tree, lo, hi, extension, limit):  # type: ignore[no-untyped-def]
+    """The reference: draw, extend, count failures, stall past `limit` (as `grow_tree`)."""
+    failures, events = 0, []
+    while tree.size < 40:
+        if failures > limit:
+            events.append(("stalled", failures))
+            break
+        node = extend(tree, view, rng.uniform(lo, hi), extension)
+        if node < 0:
+            failures += 1
+            continue
+        events.append(("node", failures))
+    return events
+
+
+def _grow_screened(view, rng, tree, lo, hi, extension, limit):  # type: ignore[no-untyped-def]
+    failures, events = 0, []
+    while tree.size < 40:
+        sample, skipped = next_sample(rng, lo, hi, tree, view, extension, limit - failures)
+        failures += skipped
+        if sample is None:
+            events.append(("stalled", failures))
+            break
+        node = extend(tree, view, sample, extension)
+        if node < 0:
+            failures += 1
+            continue
+        events.append(("node", failures))
+    return events
+
+
+@pytest.mark.parametrize(("seed", "limit"), [(0, 10_000), (1, 10_000), (2, 40), (3, 3)])
+def test_screened_samples_grow_the_tree_drawn_one_at_a_time(seed: int, limit: int) -> None:
+    """Skipping the samples `extend` surely fails on, in compiled code, grows the same tree
+    with the same failures, stalls at the same point, and leaves the generator where drawing
+    one sample at a time leaves it."""
+    view = _view()
+    lo, hi = np.array([-1.0, -1.0, -0.5]), np.array([6.0, 6.0, 2.5])  # beyond the grid too
+    ref_rng, rng = np.random.default_rng(seed), np.random.default_rng(seed)
+    ref_tree, tree = Tree(np.array([0.8, 0.8, 1.0])), Tree(np.array([0.8, 0.8, 1.0]))
+    expected = _grow_one_at_a_time(view, ref_rng, ref_tree, lo, hi, 0.8, limit)
+    assert _grow_screened(view, rng, tree, lo, hi, 0.8, limit) == expected
+    assert max(f for _, f in expected) > 0, "no sample failed"
+    np.testing.assert_array_equal(tree.positions, ref_tree.positions)
+    np.testing.assert_array_equal(tree.parents, ref_tree.parents)
+    assert rng.bit_generator.state == ref_rng.bit_generator.state
+    if limit == 3:
+        assert expected[-1][0] == "stalled"
+
+
+def test_the_screen_never_skips_a_sample_extend_takes() -> None:
+    """Samples on voxel faces, at the extension's length and level with two nodes: where
+    rounding could decide, the screen leaves the sample to `extend`."""
+    view = _view()
+    rng = np.random.default_rng(7)
+    tree = _grow(None, 0, samples=200)
+    grid = rng.integers(0, 50, size=(4000, 3)) * VOXEL * np.array([1.0, 1.0, 0.4])
+    off_grid = rng.uniform([0, 0, 0], [5.0, 5.0, 2.0], size=(4000, 3))
+    node = tree.positions[rng.integers(0, tree.size, 4000)]
+    direction = rng.normal(size=(4000, 3))
+    at_reach = node + 0.8 * direction / np.linalg.norm(direction, axis=1)[:, None]
+    screened = 0
+    for sample in np.concatenate([grid, off_grid, at_reach]):
+        surely = _fails_surely(tree.positions, sample, 0.8, view.origin, view.voxel_size,
+                               view.traversable)
+        copy = Tree(tree.positions[0])
+        copy._pos, copy._parent, copy._cost = (tree._pos.copy(), tree._parent.copy(),
+                                               tree._cost.copy())
+        copy.size = tree.size
+        took = extend(copy, view, sample, 0.8) >= 0
+        assert not (surely and took), f"the screen skipped {sample.tolist()}, which extends"
+        screened += surely
+    assert screened > 1000
