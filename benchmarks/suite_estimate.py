@@ -13,8 +13,9 @@ default 1.75). The 5 runs of an area differ in seed only, so one run's CPU time 
 A planner with areas not yet flown gets a lower bound, marked as such.
 
 Run: `.venv/bin/python benchmarks/suite_estimate.py [--benchmark V] [--runs 5]
-[--busy-cores 1.75] [--log RUNS.jsonl]` after (or while) `benchmarks/crash_sweep.py` runs
-(`--log`: a kept sweep's runs, `benchmarks/records/`, in place of the sweep's own log). The
+[--busy-cores 1.75] [--log RUNS.jsonl ...]` after (or while) `benchmarks/crash_sweep.py` runs
+(`--log`: kept sweeps' runs, `benchmarks/records/`, in place of the sweep's own log; a run of a
+later log replaces the same planner's run of that area and seed in an earlier one). The
 total counts one version per planner name, the one the name stands for (an older version
 flown beside it is listed, not counted). Target: the 7-planner suite under 3 hours
 (`docs/PERFORMANCE.md`).
@@ -50,6 +51,16 @@ def estimate(runs: list[dict[str, Any]], areas: list[str], *, repeats: int,
     return rows
 
 
+def merged_runs(logs: list[list[dict[str, Any]]]) -> list[dict[str, Any]]:
+    """The runs of several logs, a later log's run replacing an earlier log's run of the same
+    planner, area and seed."""
+    merged: dict[tuple[str, str, int], dict[str, Any]] = {}
+    for runs in logs:
+        for run in runs:
+            merged[(run["planner"], run["area"], run["seed"])] = run
+    return list(merged.values())
+
+
 def _current(planner_id: str) -> str:
     """The id the name of `planner_id` stands for now (itself for a name no longer registered,
     such as a third-party planner not installed here)."""
@@ -66,8 +77,10 @@ def main() -> None:
     parser.add_argument("--benchmark", default=None, help="benchmark version (default: the tree's)")
     parser.add_argument("--runs", type=int, default=5, help="runs per area in the suite")
     parser.add_argument("--busy-cores", type=float, default=1.75)
-    parser.add_argument("--log", type=Path, default=LOG,
-                        help="the crash sweep's runs (default: its log under benchmarks/results)")
+    parser.add_argument("--log", type=Path, nargs="+", default=[LOG],
+                        help="crash sweeps' runs, a later log's run replacing an earlier's of the "
+                             "same planner, area and seed (default: the sweep's log under "
+                             "benchmarks/results)")
     parser.add_argument("--name", default="suite_estimate",
                         help="the JSON's name under benchmarks/results/")
     args = parser.parse_args()
@@ -77,9 +90,10 @@ def main() -> None:
     from flybo.versions import benchmark_version
 
     version = args.benchmark or benchmark_version()
-    if not args.log.is_file():
-        raise SystemExit(f"{args.log}: no such file")
-    runs = stored_runs(version, args.log)
+    missing = [str(log) for log in args.log if not log.is_file()]
+    if missing:
+        raise SystemExit(f"{', '.join(missing)}: no such file")
+    runs = merged_runs([stored_runs(version, log) for log in args.log])
     rows = estimate(runs, area_names(), repeats=args.runs, busy_cores=args.busy_cores)
     if not rows:
         raise SystemExit(f"no run of benchmark {version} in {args.log} records its CPU time: run "

@@ -1,9 +1,11 @@
-"""benchmarks/suite_estimate.py: the suite's estimate from a kept sweep's runs, counting the
-version each planner name stands for, and a missing log refused."""
+"""benchmarks/suite_estimate.py: the suite's estimate from kept sweeps' runs, counting the
+version each planner name stands for, a later log's run replacing an earlier's, and a missing
+log refused."""
 
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -11,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from areas import area_names
-from benchmarks.suite_estimate import _current, estimate
+from benchmarks.suite_estimate import _current, estimate, merged_runs
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "benchmarks" / "suite_estimate.py"
@@ -57,3 +59,22 @@ def test_a_missing_log_is_refused(tmp_path: Path) -> None:
                           capture_output=True, text=True, check=False)
     assert done.returncode != 0
     assert "none.jsonl: no such file" in done.stderr
+
+
+def test_a_later_log_replaces_the_same_run_of_an_earlier_one(tmp_path: Path) -> None:
+    first, second = _runs("classic-v2", 10.0), _runs("classic-v2", 4.0)[:2]
+    merged = merged_runs([first, second])
+    assert len(merged) == len(first)
+    (row,) = estimate(merged, area_names(), repeats=1, busy_cores=1.0)
+    assert row["cpu_s"] == pytest.approx(4.0 * 2 + 10.0 * (len(first) - 2))
+    logs = []
+    for name, runs in (("old.jsonl", first), ("new.jsonl", second)):
+        logs.append(tmp_path / name)
+        logs[-1].write_text("".join(json.dumps(r) + "\n" for r in runs))
+    done = subprocess.run([sys.executable, str(SCRIPT), "--benchmark", "test-1", "--log",
+                           *map(str, logs), "--busy-cores", "1", "--runs", "1",
+                           "--name", "suite_estimate_test"],
+                          capture_output=True, text=True, cwd=tmp_path, check=False)
+    assert done.returncode == 0, done.stderr
+    total = 10.0 * (len(first) - 2) + 8.0
+    assert re.search(rf"classic-v2\s+{len(first)}/{len(first)}\s+{total:.0f}\s", done.stdout)
