@@ -52,12 +52,13 @@ def estimate(runs: list[dict[str, Any]], areas: list[str], *, repeats: int,
 
 
 def merged_runs(logs: list[list[dict[str, Any]]]) -> list[dict[str, Any]]:
-    """The runs of several logs, a later log's run replacing an earlier log's run of the same
-    planner, area and seed."""
+    """The runs of several logs that record their CPU time, a later log's run replacing an
+    earlier log's run of the same planner, area and seed."""
     merged: dict[tuple[str, str, int], dict[str, Any]] = {}
     for runs in logs:
         for run in runs:
-            merged[(run["planner"], run["area"], run["seed"])] = run
+            if run.get("cpu_s") is not None:
+                merged[(run["planner"], run["area"], run["seed"])] = run
     return list(merged.values())
 
 
@@ -77,7 +78,7 @@ def main() -> None:
     parser.add_argument("--benchmark", default=None, help="benchmark version (default: the tree's)")
     parser.add_argument("--runs", type=int, default=5, help="runs per area in the suite")
     parser.add_argument("--busy-cores", type=float, default=1.75)
-    parser.add_argument("--log", type=Path, nargs="+", default=[LOG],
+    parser.add_argument("--log", type=Path, nargs="+", action="extend", default=None,
                         help="crash sweeps' runs, a later log's run replacing an earlier's of the "
                              "same planner, area and seed (default: the sweep's log under "
                              "benchmarks/results)")
@@ -90,13 +91,15 @@ def main() -> None:
     from flybo.versions import benchmark_version
 
     version = args.benchmark or benchmark_version()
-    missing = [str(log) for log in args.log if not log.is_file()]
+    logs: list[Path] = args.log or [LOG]
+    missing = [str(log) for log in logs if not log.is_file()]
     if missing:
         raise SystemExit(f"{', '.join(missing)}: no such file")
-    runs = merged_runs([stored_runs(version, log) for log in args.log])
+    runs = merged_runs([stored_runs(version, log) for log in logs])
     rows = estimate(runs, area_names(), repeats=args.runs, busy_cores=args.busy_cores)
     if not rows:
-        raise SystemExit(f"no run of benchmark {version} in {args.log} records its CPU time: run "
+        named = ", ".join(map(str, logs))
+        raise SystemExit(f"no run of benchmark {version} in {named} records its CPU time: run "
                          "benchmarks/crash_sweep.py first")
     print_table(f"Suite wall time estimated from CPU time (benchmark {version}, {args.runs} runs "
                 f"per area, {args.busy_cores} busy cores)",

@@ -223,12 +223,23 @@ def _fails_surely(positions: FloatArray, sample: FloatArray, extension_m: float,
         if not (0 <= i < nx and 0 <= j < ny and 0 <= k < nz) or not mask[i, j, k]:
             return True
     # The edge, sampled as `sim.search_checks.segment_in_mask` samples it: any sample surely
-    # outside the mask fails it.
+    # outside the mask fails it. An edge of the full extension is a whole number of quarter
+    # voxels long, where rounding decides between two sample counts: it fails surely when it
+    # does with either.
     a = (positions[near] - origin) / voxel_size
     span = math.sqrt(np.sum((b - a) ** 2)) * 4.0
-    if _near_integer(span):
-        return False
-    steps = max(1, math.ceil(span))
+    if not _near_integer(span):
+        return _edge_fails_surely(a, b, max(1, math.ceil(span)), mask)
+    n = math.floor(span + 0.5)
+    return (_edge_fails_surely(a, b, max(1, n), mask)
+            and _edge_fails_surely(a, b, max(1, n + 1), mask))
+
+
+@numba.njit(cache=True)
+def _edge_fails_surely(a: FloatArray, b: FloatArray, steps: int, mask: BoolGrid) -> bool:
+    """Whether one of the `steps + 1` samples of a→b (voxel units) lies surely outside `mask`:
+    out of the grid or in a voxel not set, and not within the margin of a voxel face."""
+    nx, ny, nz = mask.shape
     for s in range(steps + 1):
         t = s / steps
         x = a[0] + (b[0] - a[0]) * t
@@ -267,12 +278,14 @@ def next_sample(rng: np.random.Generator, lo: FloatArray, hi: FloatArray, tree: 
     Leaves `rng` exactly as drawing the samples one at a time up to the returned one would:
     a batch is drawn ahead, screened in compiled code, and the generator rewound to just past
     the sample returned. `extend` must still be asked about that sample."""
+    if allowed_failures < 0:
+        return None, 0
     mask = view.traversable
     skipped = 0
     while True:
         state = rng.bit_generator.state
         batch = rng.uniform(lo, hi, size=(_SCREEN_BATCH, 3))
-        count = min(_SCREEN_BATCH, allowed_failures - skipped + 1)
+        count = max(0, min(_SCREEN_BATCH, allowed_failures - skipped + 1))
         first = _first_maybe(tree.positions, batch, extension_m, view.origin, view.voxel_size,
                              mask, count)
         if first < count or count < _SCREEN_BATCH:

@@ -147,8 +147,10 @@ def test_the_screen_never_skips_a_sample_extend_takes() -> None:
     node = tree.positions[rng.integers(0, tree.size, 4000)]
     direction = rng.normal(size=(4000, 3))
     at_reach = node + 0.8 * direction / np.linalg.norm(direction, axis=1)[:, None]
+    pairs = rng.integers(0, tree.size, size=(2000, 2))
+    level = (tree.positions[pairs[:, 0]] + tree.positions[pairs[:, 1]]) / 2.0  # midway: a tie
     screened = 0
-    for sample in np.concatenate([grid, off_grid, at_reach]):
+    for sample in np.concatenate([grid, off_grid, at_reach, level]):
         surely = _fails_surely(tree.positions, sample, 0.8, view.origin, view.voxel_size,
                                view.traversable)
         copy = Tree(tree.positions[0])
@@ -159,3 +161,23 @@ def test_the_screen_never_skips_a_sample_extend_takes() -> None:
         assert not (surely and took), f"the screen skipped {sample.tolist()}, which extends"
         screened += surely
     assert screened > 1000
+
+
+@pytest.mark.parametrize("allowed", [-3, -1, 0, 1, 31, 32, 33, 63, 64])
+def test_where_every_sample_fails_the_screen_stalls_after_the_allowed_failures(
+        allowed: int) -> None:
+    """A root walled in by occupied voxels fails every sample: the screen skips exactly the
+    samples the one-at-a-time loop would have drawn before stalling (one more than the failures
+    allowed, none below zero) and leaves the generator as those draws leave it, whatever their
+    place in a batch."""
+    view = _view()
+    lo, hi = np.array([0.2, 0.2, 0.2]), np.array([4.8, 4.8, 1.8])
+    # (16, y, z) is the occupied wall: a root there reaches no traversable voxel.
+    tree = Tree(np.array([1.65, 0.55, 1.05]))  # a voxel centre: no sample near a face
+    rng, ref_rng = np.random.default_rng(allowed + 10), np.random.default_rng(allowed + 10)
+    sample, skipped = next_sample(rng, lo, hi, tree, view, 0.8, allowed)
+    drawn = max(allowed + 1, 0)
+    for _ in range(drawn):
+        assert extend(tree, view, ref_rng.uniform(lo, hi), 0.8) < 0
+    assert sample is None and skipped == drawn
+    assert rng.bit_generator.state == ref_rng.bit_generator.state
