@@ -41,6 +41,7 @@ import numpy.typing as npt
 from planners.api import Observation, Plan, Planner, PlannerContext
 from planners.astar import PathCache
 from planners.esm_config import EsmConfig, EsmReconConfig
+from planners.esm_screen import SteerRule, skip_failing_tries
 from planners.gain import GainEvaluator
 from planners.lines import reachable_lengths, segment_clear_world, segments_clear
 from planners.recon_gain import ReconGainEvaluator
@@ -63,6 +64,9 @@ FloatArray = npt.NDArray[np.float64]
 class Esm(Planner):
     config_model = EsmConfig
     config: EsmConfig
+    # Skip the tries `_steer` surely fails on in compiled code (`planners.esm_screen`): the
+    # same tree, faster; off only to check that.
+    screen_tries: bool = True
 
     def reset(self, ctx: PlannerContext) -> None:
         super().reset(ctx)
@@ -216,10 +220,20 @@ class Esm(Planner):
         local_missing = cfg.local_count - (int(np.count_nonzero(d_root <= cfg.local_radius_m))
                                            - 1)
         added = 0
+        tries = 0
         traversable: npt.NDArray[np.intp] | None = None  # flat ids, drawn from on first use
-        for _ in range(cfg.tries_per_call):
-            if added >= cfg.new_per_call:
-                break
+        screen = self.screen_tries and cfg.global_sampling == "box"
+        while tries < cfg.tries_per_call and added < cfg.new_per_call:
+            if screen:
+                # The tries `_steer` surely fails on, skipped as if made (`planners.esm_screen`).
+                skipped = skip_failing_tries(rng, tree.positions, view, self._steer_rule(), root,
+                                             cfg.local_radius_m, local_missing, ctx.bounds_min,
+                                             ctx.bounds_max, cfg.tries_per_call - tries)
+                tries += skipped
+                local_missing -= min(skipped, max(local_missing, 0))
+                if tries >= cfg.tries_per_call:
+                    break
+            tries += 1
             if local_missing > 0:
                 # Semilocal sampling: a point on the sphere of `local_radius_m` round the root,
                 # at most as many as local nodes are missing, kept or not (as the paper's
@@ -249,6 +263,13 @@ class Esm(Planner):
                 continue
             added += 1
         return added
+
+    def _steer_rule(self) -> SteerRule:
+        """What `_steer` and `_crop` test, for the screen of failing tries."""
+        cfg = self.config
+        return SteerRule(candidates=cfg.steer_candidates, extension_m=cfg.extension_m,
+                         crop_margin_m=cfg.crop_margin_m, crop_min_m=cfg.crop_min_m,
+                         min_segment_m=0.0, density_radius_m=cfg.density_radius_m)
 
     def _steer(self, tree: SegmentTree, view: MapView, sample: FloatArray) -> FloatArray | None:
         """A new node position toward `sample` from the first of its `steer_candidates`

@@ -20,6 +20,7 @@ configuration of it (`planners.esm_horizon_config`):
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import ClassVar
 
@@ -35,6 +36,7 @@ from planners.esm_horizon_config import (
     EsmReconHorizonConfig,
     EsmReconHorizonV3Config,
 )
+from planners.esm_screen import SteerRule
 from planners.segment_tree import BoolArray, SegmentTree
 from sim.map_view import MapView
 
@@ -138,6 +140,10 @@ class EsmHorizonPlanner(Esm):
         if point is None or float(np.linalg.norm(point - start)) < minimum:
             return None
         return point
+
+    def _steer_rule(self) -> SteerRule:
+        return dataclasses.replace(super()._steer_rule(),
+                                   min_segment_m=self.config.min_segment_m)
 
     def _refreshable(self, tree: SegmentTree) -> npt.NDArray[np.bool_] | None:
         """Only nodes within `update_range_m` of the root have their stale gains recomputed:
