@@ -4,9 +4,9 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
 from planners.search import IndexArray
 from sim.camera import CameraConfig
@@ -24,7 +24,53 @@ def clusters(view: MapView, min_size: int) -> list[FrontierCluster]:
     return view.frontier_clusters(min_size)
 
 
-_CONNECT_26 = np.ones((3, 3, 3), dtype=bool)
+@numba.njit(cache=True)
+def _grouped_voxels(frontier: npt.NDArray[np.bool_], lo: IndexArray, hi: IndexArray,
+                    min_size: int) -> IndexArray:
+    """(K, 3) indices, in C order, of the frontier voxels of the box [lo, hi) whose 26-connected
+    group of frontier voxels inside the box has at least `min_size` voxels.
+
+    The groups are grown from the frontier voxels only (a breadth-first search), so the cost
+    follows the frontier's size in the box, not the box's volume."""
+    sx, sy, sz = hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]
+    group = np.zeros((sx, sy, sz), dtype=np.int32)  # 0: not yet reached
+    sizes = [0]  # sizes[g]: voxels of group g
+    queue = np.empty(sx * sy * sz, dtype=np.int64)
+    kept = 0
+    for x in range(sx):
+        for y in range(sy):
+            for z in range(sz):
+                if group[x, y, z] != 0 or not frontier[lo[0] + x, lo[1] + y, lo[2] + z]:
+                    continue
+                g = len(sizes)
+                group[x, y, z] = g
+                queue[0] = (x * sy + y) * sz + z
+                head, tail = 0, 1
+                while head < tail:
+                    q = queue[head]
+                    head += 1
+                    qx, qy, qz = q // (sy * sz), (q // sz) % sy, q % sz
+                    for dx in range(max(qx - 1, 0), min(qx + 2, sx)):
+                        for dy in range(max(qy - 1, 0), min(qy + 2, sy)):
+                            for dz in range(max(qz - 1, 0), min(qz + 2, sz)):
+                                if group[dx, dy, dz] == 0 and \
+                                        frontier[lo[0] + dx, lo[1] + dy, lo[2] + dz]:
+                                    group[dx, dy, dz] = g
+                                    queue[tail] = (dx * sy + dy) * sz + dz
+                                    tail += 1
+                sizes.append(tail)
+                if tail >= min_size:
+                    kept += tail
+    out = np.empty((kept, 3), dtype=np.int64)
+    n = 0
+    for x in range(sx):
+        for y in range(sy):
+            for z in range(sz):
+                g = group[x, y, z]
+                if g != 0 and sizes[g] >= min_size:
+                    out[n, 0], out[n, 1], out[n, 2] = lo[0] + x, lo[1] + y, lo[2] + z
+                    n += 1
+    return out
 
 
 def frontiers_in_view(
@@ -48,13 +94,11 @@ def frontiers_in_view(
     hi = np.minimum(view.world_to_index((here + reach)[None])[0] + 1, np.array(view.shape))
     if np.any(hi <= lo):
         return np.zeros((0, 3), dtype=np.int64), np.zeros((0, 3))
-    sub = view.frontier[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
     if min_group_size > 1:
-        labels, _ = ndimage.label(sub, structure=_CONNECT_26)
-        sizes = np.bincount(labels.ravel())
-        sizes[0] = 0
-        sub = sizes[labels] >= min_group_size
-    idx = np.argwhere(sub) + lo
+        idx = _grouped_voxels(view.frontier, lo.astype(np.int64), hi.astype(np.int64),
+                              min_group_size)
+    else:
+        idx = np.argwhere(view.frontier[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]) + lo
     if len(idx) == 0:
         return idx.astype(np.int64), np.zeros((0, 3))
     offsets = view.index_to_world(idx) - here

@@ -5,8 +5,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
+from scipy import ndimage
 
-from planners.frontiers import clusters, frontiers_in_view
+from planners.frontiers import _grouped_voxels, clusters, frontiers_in_view
 from sim.camera import CameraConfig
 from sim.geometry import Pose
 from sim.occupancy import VoxelState
@@ -61,3 +63,31 @@ def test_small_frontier_groups_are_left_out() -> None:
     lone = {(69, 60, 12), (71, 60, 12), (70, 59, 12), (70, 61, 12), (70, 60, 11), (70, 60, 13)}
     assert lone <= {tuple(v) for v in every}
     assert {tuple(v) for v in grouped} == {tuple(v) for v in every} - lone
+
+
+def _labelled_reference(frontier: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                        min_size: int) -> np.ndarray:
+    """The voxels of groups of at least `min_size`, labelled in the box by SciPy."""
+    sub = frontier[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
+    labels, _ = ndimage.label(sub, structure=np.ones((3, 3, 3), dtype=bool))
+    sizes = np.bincount(labels.ravel())
+    sizes[0] = 0
+    return np.argwhere(sizes[labels] >= min_size) + lo
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_frontier_groups_are_those_scipy_labels(seed: int) -> None:
+    """The breadth-first grouping gives SciPy's 26-connected labelling's voxels, in the same
+    (C) order, for random sparse and dense grids, boxes cut at the grid's faces, and sizes."""
+    rng = np.random.default_rng(seed)
+    shape = (int(rng.integers(5, 40)), int(rng.integers(5, 40)), int(rng.integers(3, 25)))
+    frontier = rng.random(shape) < rng.choice([0.02, 0.1, 0.3, 0.6])
+    for _ in range(10):
+        lo = np.array([rng.integers(0, s) for s in shape], dtype=np.int64)
+        hi = np.array([rng.integers(a + 1, s + 1) for a, s in zip(lo, shape, strict=True)],
+                      dtype=np.int64)
+        for min_size in (1, 2, 5, 30):
+            got = _grouped_voxels(frontier, lo, hi, min_size)
+            want = _labelled_reference(frontier, lo, hi, min_size)
+            assert got.dtype == np.int64
+            np.testing.assert_array_equal(got, want)
