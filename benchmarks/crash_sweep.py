@@ -71,6 +71,7 @@ def _run(planner: str, area_name: str, seed: int, seconds: float | None, benchma
     from sim.config import preset
     from sim.episode import run_episode
     from sim.metrics import timing_summary
+    from sim.reference_speed import speed_factor
 
     area = sweep_area(area_name)
     truth = load_ground_truth(area)
@@ -97,6 +98,10 @@ def _run(planner: str, area_name: str, seed: int, seconds: float | None, benchma
         # (every thread's; what the run costs whatever else the machine runs) are the run's.
         "peak_rss_mib": peak_rss_mib(),
         "cpu_s": usage.ru_utime + usage.ru_stime,
+        # The machine's speed as the run's planning charge read it (measured once per process):
+        # whole-run CPU times of different days differ by more than it does, so estimates state
+        # the factors of the runs they add up (`benchmarks/suite_estimate.py`).
+        "speed_factor": speed_factor(),
     }
 
 

@@ -51,6 +51,18 @@ def estimate(runs: list[dict[str, Any]], areas: list[str], *, repeats: int,
     return rows
 
 
+def speed_factors(runs: list[dict[str, Any]], planners: list[str]) -> dict[str, Any]:
+    """The least and largest machine speed factor recorded by the seed-0 runs of `planners`
+    (`sim.reference_speed`; None when none records one), and how many of them record one."""
+    factors = [float(r["speed_factor"]) for r in runs
+               if r["planner"] in planners and r["seed"] == 0
+               and r.get("cpu_s") is not None and r.get("speed_factor") is not None]
+    counted = sum(1 for r in runs if r["planner"] in planners and r["seed"] == 0
+                  and r.get("cpu_s") is not None)
+    return {"least": min(factors) if factors else None, "largest": max(factors) if factors
+            else None, "recorded": len(factors), "runs": counted}
+
+
 def merged_runs(logs: list[list[dict[str, Any]]]) -> list[dict[str, Any]]:
     """The runs of several logs that record their CPU time, a later log's run replacing an
     earlier log's run of the same planner, area and seed."""
@@ -112,10 +124,18 @@ def main() -> None:
     complete = all(r["complete"] for r in counted)
     print(f"\nall planners ({', '.join(r['planner'] for r in counted)}): {total / 60:.2f} h"
           f"{'' if complete else ' (lower bound)'}")
+    factors = speed_factors(runs, [r["planner"] for r in counted])
+    if factors["recorded"]:
+        print(f"machine speed factor of these runs: {factors['least']:.2f}-"
+              f"{factors['largest']:.2f} ({factors['recorded']} of {factors['runs']} runs "
+              "record it): CPU times of days with other factors do not add up")
+    else:
+        print("machine speed factor of these runs: not recorded")
     path = write_json(args.name, {"benchmark": version, "runs": args.runs,
                                          "busy_cores": args.busy_cores, "planners": rows,
                                          "counted": [r["planner"] for r in counted],
-                                         "total_h": total / 60, "complete": complete})
+                                         "total_h": total / 60, "complete": complete,
+                                         "speed_factor": factors})
     print(f"wrote {path}")
 
 

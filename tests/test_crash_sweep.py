@@ -25,6 +25,7 @@ def test_a_run_logs_its_surface_scores(tmp_path: Path) -> None:
     assert run["fscore"] == pytest.approx(2 * precision * recall / (precision + recall))
     assert run["rmse_m"] > 0.0
     assert (tmp_path / run["recording"]).exists()
+    assert run["speed_factor"] > 0.0  # the machine's speed the charge read
     json.dumps(run)  # one log line
 
 

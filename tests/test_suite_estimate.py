@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from areas import area_names
-from benchmarks.suite_estimate import _current, estimate, merged_runs
+from benchmarks.suite_estimate import _current, estimate, merged_runs, speed_factors
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "benchmarks" / "suite_estimate.py"
@@ -78,3 +78,22 @@ def test_a_later_log_replaces_the_same_run_of_an_earlier_one(tmp_path: Path) -> 
     assert done.returncode == 0, done.stderr
     total = 10.0 * (len(first) - 2) + 8.0
     assert re.search(rf"classic-v2\s+{len(first)}/{len(first)}\s+{total:.0f}\s", done.stdout)
+
+
+def test_the_speed_factors_of_the_runs_counted_are_stated(tmp_path: Path) -> None:
+    classic, nbvp = _current("classic"), _current("nbvp")
+    runs = [{**r, "speed_factor": 1.2 + 0.01 * n}
+            for n, r in enumerate(_runs(classic, 5.0)[:4])]
+    runs += [*_runs(classic, 5.0)[4:], {**_runs(nbvp, 5.0)[0], "speed_factor": 3.0}]
+    runs += [{**_runs("classic-v1", 5.0)[0], "speed_factor": 9.0}]  # listed, not counted
+    factors = speed_factors(runs, [classic])
+    assert factors == {"least": 1.2, "largest": pytest.approx(1.23), "recorded": 4,
+                       "runs": len(area_names())}
+    assert speed_factors(runs, ["fuel-v2"])["least"] is None
+    log = tmp_path / "runs.jsonl"
+    log.write_text("".join(json.dumps(r) + "\n" for r in runs))
+    done = subprocess.run([sys.executable, str(SCRIPT), "--benchmark", "test-1", "--log",
+                           str(log), "--name", "suite_estimate_test"],
+                          capture_output=True, text=True, cwd=tmp_path, check=False)
+    assert done.returncode == 0, done.stderr
+    assert f"1.20-3.00 (5 of {len(area_names()) + 1} runs record it)" in done.stdout
