@@ -27,7 +27,20 @@ from tests.web.stored import current_version
 
 POSTGRES_ADMIN_URL = os.environ.get("FLYBO_TEST_POSTGRES_URL",
                                     "postgresql+psycopg://postgres@127.0.0.1:5432/test")
-REDIS_URL = os.environ.get("FLYBO_TEST_REDIS_URL", "redis://127.0.0.1:6379/15")
+
+
+def _worker_redis_url(base: str) -> str:
+    """`base` with its database index lowered by the xdist worker's number (gw0: 15, gw1: 14,
+    ...): `redis_url` empties its database, and that must not wipe the queued jobs of a test
+    another worker is running at the same time."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw")
+    url, _, db = base.rpartition("/")
+    if not (worker.isdigit() and db.isdigit()) or int(db) < int(worker):
+        return base
+    return f"{url}/{int(db) - int(worker)}"
+
+
+REDIS_URL = _worker_redis_url(os.environ.get("FLYBO_TEST_REDIS_URL", "redis://127.0.0.1:6379/15"))
 
 
 def unavailable(what: str, why: str) -> None:
@@ -156,7 +169,8 @@ def client(settings: Settings, sessions: sessionmaker[Session]) -> Iterator[Test
 
 @pytest.fixture
 def redis_url() -> str:
-    """An emptied Redis database (index 15 by default) for broker tests."""
+    """An emptied Redis database (index 15 by default, one per xdist worker) for broker
+    tests."""
     reason = redis_reason()
     if reason is not None:
         unavailable("Redis", reason)
