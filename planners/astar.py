@@ -22,6 +22,7 @@ from planners.search import (
     _corner_free,
     _heap_pop,
     _heap_push,
+    _new_heap,
     _workspace,
 )
 
@@ -60,19 +61,19 @@ def _astar(
     """
     nx, ny, nz = passable.shape
     flat = passable.ravel()
-    keys = np.empty(1 << 14, dtype=np.float64)
-    vals = np.empty(1 << 14, dtype=np.int64)
+    heap = _new_heap(1 << 14)
     gi, gj, gk = goal[0], goal[1], goal[2]
     s = (start[0] * ny + start[1]) * nz + start[2]
     target = (gi * ny + gj) * nz + gk
     g[s] = 0.0
     touched[0] = s
     n_touched = 1
-    size = _heap_push(keys, vals, 0, _octile(start[0], start[1], start[2], gi, gj, gk), s)
+    heap = _heap_push(heap, 0, _octile(start[0], start[1], start[2], gi, gj, gk), s)
+    size = 1
     found = False
     while size > 0:
-        cur = vals[0]
-        size = _heap_pop(keys, vals, size)
+        cur = int(heap[0, 1])
+        size = _heap_pop(heap, size)
         if done[cur]:
             continue
         done[cur] = True
@@ -82,6 +83,7 @@ def _astar(
         ci = cur // (ny * nz)
         cj = (cur // nz) % ny
         ck = cur % nz
+        g_cur = g[cur]
         for n in range(offsets.shape[0]):
             i = ci + offsets[n, 0]
             j = cj + offsets[n, 1]
@@ -93,7 +95,7 @@ def _astar(
                 continue
             if not _corner_free(passable, ci, cj, ck, i, j, k):
                 continue
-            ng = g[cur] + step_cost[n]
+            ng = g_cur + step_cost[n]
             if ng < g[idx]:
                 if g[idx] == np.inf:
                     if n_touched == touched.shape[0]:
@@ -102,10 +104,8 @@ def _astar(
                     n_touched += 1
                 g[idx] = ng
                 parent[idx] = cur
-                if size == keys.shape[0]:
-                    keys = np.concatenate((keys, np.empty_like(keys)))
-                    vals = np.concatenate((vals, np.empty_like(vals)))
-                size = _heap_push(keys, vals, size, ng + _octile(i, j, k, gi, gj, gk), idx)
+                heap = _heap_push(heap, size, ng + _octile(i, j, k, gi, gj, gk), idx)
+                size += 1
     if not found:
         return np.zeros((0, 3), dtype=np.int64), np.inf, touched, n_touched
     count = 1

@@ -24,15 +24,11 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
+from planners.screen_margin import near_integer, near_value
 from sim.map_view import MapView
 
 FloatArray = npt.NDArray[np.float64]
 BoolGrid = npt.NDArray[np.bool_]
-
-# How near (metres or voxel units, relative above 1) a quantity may lie to where `_steer`'s
-# decision flips before the screen leaves the decision to it: far above the last-bit differences
-# between a compiled sum and NumPy's (or BLAS's) on the same inputs.
-_MARGIN = 1e-6
 
 # Tries drawn ahead per screening call: about 99 in 100 fail, so one batch usually ends at the
 # next try worth making.
@@ -51,16 +47,6 @@ class SteerRule:
     density_radius_m: float
 
 
-@numba.njit(cache=True, inline="always")
-def _near(x: float, threshold: float) -> bool:
-    return abs(x - threshold) <= _MARGIN * (abs(threshold) + 1.0)
-
-
-@numba.njit(cache=True, inline="always")
-def _near_face(x: float) -> bool:
-    return abs(x - math.floor(x + 0.5)) < _MARGIN
-
-
 @numba.njit(cache=True)
 def _walk(traversable: BoolGrid, a: FloatArray, b: FloatArray, steps: int) -> float:
     """`planners.lines._farthest_clear` (not escaping) over `steps` samples of a→b (voxel
@@ -73,7 +59,7 @@ def _walk(traversable: BoolGrid, a: FloatArray, b: FloatArray, steps: int) -> fl
         x = a[0] + (b[0] - a[0]) * t
         y = a[1] + (b[1] - a[1]) * t
         z = a[2] + (b[2] - a[2]) * t
-        if _near_face(x) or _near_face(y) or _near_face(z):
+        if near_integer(x) or near_integer(y) or near_integer(z):
             return math.nan
         i, j, k = math.floor(x), math.floor(y), math.floor(z)
         if not (0 <= i < nx and 0 <= j < ny and 0 <= k < nz) or not traversable[i, j, k]:
@@ -100,20 +86,20 @@ def _crop_fails_surely(positions: FloatArray, start: FloatArray, goal: FloatArra
     if t < 1.0:
         length = t * full - crop_margin
         limit = min(crop_min, full)
-        if _near(length, limit):
+        if near_value(length, limit):
             return False
         if length < limit:
             return True
     point = start + (goal - start) * (length / full)
     v = (point - origin) / voxel_size
-    if _near_face(v[0]) or _near_face(v[1]) or _near_face(v[2]):
+    if near_integer(v[0]) or near_integer(v[1]) or near_integer(v[2]):
         return False
     i, j, k = math.floor(v[0]), math.floor(v[1]), math.floor(v[2])
     nx, ny, nz = traversable.shape
     if not (0 <= i < nx and 0 <= j < ny and 0 <= k < nz) or not traversable[i, j, k]:
         return True
     if min_segment > 0.0:
-        if _near(length, min_segment):
+        if near_value(length, min_segment):
             return False
         if length < min_segment:
             return True
@@ -124,7 +110,7 @@ def _crop_fails_surely(positions: FloatArray, start: FloatArray, goal: FloatArra
         d2 = positions[r, 2] - point[2]
         nearest = min(nearest, (d0 * d0 + d1 * d1) + d2 * d2)
     nearest = math.sqrt(nearest)
-    if _near(nearest, density):
+    if near_value(nearest, density):
         return False
     return nearest < density
 
@@ -140,7 +126,7 @@ def _candidate_fails_surely(positions: FloatArray, node: int, sample: FloatArray
     d = sample - start
     dist = math.sqrt((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2])
     if min_segment > 0.0:
-        if _near(dist, min_segment):
+        if near_value(dist, min_segment):
             return False
         if dist < min_segment:
             return True
@@ -158,7 +144,7 @@ def _candidate_fails_surely(positions: FloatArray, node: int, sample: FloatArray
     a = (start - origin) / voxel_size
     b = (goal - origin) / voxel_size
     span = math.sqrt(((b[0] - a[0]) ** 2 + (b[1] - a[1]) ** 2) + (b[2] - a[2]) ** 2) * 4.0
-    if _near_face(span):
+    if near_integer(span):
         n = max(1, math.floor(span + 0.5))
         return (_crop_fails_surely(positions, start, goal, full, n, crop_margin, crop_min,
                                    min_segment, density, traversable, origin, voxel_size)
@@ -197,7 +183,7 @@ def _sample_fails_surely(positions: FloatArray, sample: FloatArray, candidates: 
             m -= 1
         best_d[m] = q
         best_i[m] = r
-    if count < n and best_d[count] - best_d[count - 1] <= _MARGIN * (best_d[count - 1] + 1.0):
+    if count < n and near_value(best_d[count], best_d[count - 1]):
         return False
     for c in range(count):
         if not _candidate_fails_surely(positions, best_i[c], sample, extension, crop_margin,

@@ -23,6 +23,7 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+import numba
 import numpy as np
 import numpy.typing as npt
 
@@ -32,6 +33,7 @@ from planners.rrt import Tree, extend, next_sample
 from sim.map_view import MapView
 
 FloatArray = npt.NDArray[np.float64]
+IdArray = npt.NDArray[np.int64]
 StateGrid = npt.NDArray[np.uint8]
 
 
@@ -71,19 +73,38 @@ def _node_gain(gains: GainEvaluator, view: MapView, position: FloatArray, yaw_mo
     return yaw, gains.at_yaw(columns, yaw)
 
 
+@numba.njit(cache=True)
+def _branch_sums(own: FloatArray, parents: IdArray) -> FloatArray:
+    """(N,) each node's `own` plus its ancestors', by pointer jumping: each round adds to every
+    node the sum it does not hold yet of its nearest ancestor's chain, doubling the ancestors
+    summed. The additions, and so the rounding, do not depend on the order of ids."""
+    n = own.shape[0]
+    acc = own.copy()
+    up = parents.copy()
+    new_acc = np.empty(n)
+    new_up = np.empty(n, dtype=np.int64)
+    while True:
+        active = False
+        for i in range(n):
+            u = up[i]
+            if u >= 0:
+                active = True
+                new_acc[i] = acc[i] + acc[u]
+                new_up[i] = up[u]
+            else:
+                new_acc[i] = acc[i]
+                new_up[i] = u
+        if not active:
+            return acc
+        acc, new_acc = new_acc, acc
+        up, new_up = new_up, up
+
+
 def _values(tree: Tree, degressive: float) -> FloatArray:
     """(N,) branch values from the node gains, whatever the order of ids (RRT* re-hangs
-    nodes under newer ones): pointer jumping, each round doubling the ancestors summed."""
-    acc = tree.gains * np.exp(-degressive * tree.costs)
-    up = tree.parents.copy()
-    while np.any(up >= 0):
-        has = up >= 0
-        new_acc = acc.copy()
-        new_acc[has] += acc[up[has]]
-        new_up = up.copy()
-        new_up[has] = up[up[has]]
-        acc, up = new_acc, new_up
-    return acc
+    nodes under newer ones)."""
+    # The discount stays NumPy's exp: a compiled exp may round differently.
+    return _branch_sums(tree.gains * np.exp(-degressive * tree.costs), tree.parents)
 
 
 def grow_tree(

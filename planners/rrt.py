@@ -14,6 +14,7 @@ import numpy as np
 import numpy.typing as npt
 
 from planners.lines import segment_clear_world, segments_clear
+from planners.screen_margin import near_integer, near_value
 from planners.search import BoolGrid
 from sim.map_view import MapView
 
@@ -181,17 +182,6 @@ def extend(
     return node
 
 
-# How near (voxel units, or relative) a quantity of the screen may lie to where `extend`'s
-# decision flips before the screen leaves the decision to `extend`: far above the last-bit
-# differences between a compiled sum and NumPy's (or BLAS's) on the same inputs.
-_SCREEN_MARGIN = 1e-6
-
-
-@numba.njit(cache=True, inline="always")
-def _near_integer(x: float) -> bool:
-    return abs(x - math.floor(x + 0.5)) < _SCREEN_MARGIN
-
-
 @numba.njit(cache=True)
 def _fails_surely(positions: FloatArray, sample: FloatArray, extension_m: float,
                   origin: FloatArray, voxel_size: float, mask: BoolGrid) -> bool:
@@ -208,17 +198,17 @@ def _fails_surely(positions: FloatArray, sample: FloatArray, extension_m: float,
             best, second, near = q, best, r
         elif q < second:
             second = q
-    if second - best <= _SCREEN_MARGIN * (best + 1.0):
+    if near_value(second, best):
         return False
     # `steer`'s new point.
     d = sample - positions[near]
     length = math.sqrt((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2])
-    if abs(length - extension_m) <= _SCREEN_MARGIN * (extension_m + 1.0) or length < 1e-3:
+    if near_value(length, extension_m) or length < 1e-3:
         return False
     new = sample.copy() if length <= extension_m else positions[near] + d * (extension_m / length)
     nx, ny, nz = mask.shape
     b = (new - origin) / voxel_size
-    if not (_near_integer(b[0]) or _near_integer(b[1]) or _near_integer(b[2])):
+    if not (near_integer(b[0]) or near_integer(b[1]) or near_integer(b[2])):
         i, j, k = math.floor(b[0]), math.floor(b[1]), math.floor(b[2])
         if not (0 <= i < nx and 0 <= j < ny and 0 <= k < nz) or not mask[i, j, k]:
             return True
@@ -228,7 +218,7 @@ def _fails_surely(positions: FloatArray, sample: FloatArray, extension_m: float,
     # does with either.
     a = (positions[near] - origin) / voxel_size
     span = math.sqrt(np.sum((b - a) ** 2)) * 4.0
-    if not _near_integer(span):
+    if not near_integer(span):
         return _edge_fails_surely(a, b, max(1, math.ceil(span)), mask)
     n = math.floor(span + 0.5)
     return (_edge_fails_surely(a, b, max(1, n), mask)
@@ -245,7 +235,7 @@ def _edge_fails_surely(a: FloatArray, b: FloatArray, steps: int, mask: BoolGrid)
         x = a[0] + (b[0] - a[0]) * t
         y = a[1] + (b[1] - a[1]) * t
         z = a[2] + (b[2] - a[2]) * t
-        if _near_integer(x) or _near_integer(y) or _near_integer(z):
+        if near_integer(x) or near_integer(y) or near_integer(z):
             continue
         i, j, k = math.floor(x), math.floor(y), math.floor(z)
         if not (0 <= i < nx and 0 <= j < ny and 0 <= k < nz) or not mask[i, j, k]:

@@ -28,40 +28,57 @@ _OFFSETS = np.array(
 _STEP_COST = np.sqrt(np.sum(_OFFSETS**2, axis=1)).astype(np.float64)
 
 
+# A search's priority queue: a binary min-heap of (key, voxel) rows in one (M, 2) float64 array,
+# the flat voxel index stored as a float (exact below 2^53), so that each level of a sift reads
+# one cache line rather than one in each of two arrays. Ties pop in the order of the classic
+# swap-based heap: the hole-moving sifts below make the same moves.
+HeapArray = npt.NDArray[np.float64]
+
+
 @numba.njit(cache=True)
-def _heap_push(keys: npt.NDArray[np.float64], vals: npt.NDArray[np.int64], size: int,
-               key: float, val: int) -> int:
+def _new_heap(rows: int) -> HeapArray:
+    return np.empty((rows, 2), dtype=np.float64)
+
+
+@numba.njit(cache=True)
+def _heap_push(heap: HeapArray, size: int, key: float, val: int) -> HeapArray:
+    """Push (key, val); returns the heap (doubled when it was full). The size grows by one."""
+    if size == heap.shape[0]:
+        heap = np.concatenate((heap, np.empty_like(heap)))
     i = size
-    keys[i] = key
-    vals[i] = val
     while i > 0:
         p = (i - 1) >> 1
-        if keys[p] <= keys[i]:
+        if heap[p, 0] <= key:
             break
-        keys[p], keys[i] = keys[i], keys[p]
-        vals[p], vals[i] = vals[i], vals[p]
+        heap[i, 0] = heap[p, 0]
+        heap[i, 1] = heap[p, 1]
         i = p
-    return size + 1
+    heap[i, 0] = key
+    heap[i, 1] = val
+    return heap
 
 
 @numba.njit(cache=True)
-def _heap_pop(keys: npt.NDArray[np.float64], vals: npt.NDArray[np.int64], size: int) -> int:
+def _heap_pop(heap: HeapArray, size: int) -> int:
+    """Drop the top row (read it first); returns the new size."""
     size -= 1
-    keys[0] = keys[size]
-    vals[0] = vals[size]
+    key = heap[size, 0]
+    val = heap[size, 1]
     i = 0
     while True:
         left = 2 * i + 1
         if left >= size:
             break
         c = left
-        if left + 1 < size and keys[left + 1] < keys[left]:
+        if left + 1 < size and heap[left + 1, 0] < heap[left, 0]:
             c = left + 1
-        if keys[i] <= keys[c]:
+        if key <= heap[c, 0]:
             break
-        keys[c], keys[i] = keys[i], keys[c]
-        vals[c], vals[i] = vals[i], vals[c]
+        heap[i, 0] = heap[c, 0]
+        heap[i, 1] = heap[c, 1]
         i = c
+    heap[i, 0] = key
+    heap[i, 1] = val
     return size
 
 
@@ -89,18 +106,17 @@ def _dijkstra(
     done: npt.NDArray[np.bool_],
     touched: npt.NDArray[np.int64],
     n_touched: int,
-    keys: npt.NDArray[np.float64],
-    vals: npt.NDArray[np.int64],
+    heap: HeapArray,
     size: int,
     expand: int,
-) -> tuple[int, npt.NDArray[np.int64], int, npt.NDArray[np.float64], npt.NDArray[np.int64], int]:
+) -> tuple[int, npt.NDArray[np.int64], int, HeapArray, int]:
     """Runs a search on until the first popped voxel set in `goals` (returned as a flat index,
     -1 if none) or until the frontier passes `max_cost`.
 
     `dist`, `parent` and `done` are flat workspaces over the grid (inf, -1, False where the search
     has not been); the search writes its results there and lists every voxel it gave a distance
     in `touched[:n_touched]` (grown when full), so that the caller can read and clean up only
-    those instead of the whole grid. `keys`, `vals` and `size` are its heap (grown when full).
+    those instead of the whole grid. `heap` and `size` are its queue (grown when full).
     `expand`, when not -1, is the goal the previous call returned and the caller turned down: it
     is expanded first, as if it had not been a goal. Returns the goal, then the arrays in use
     with their counts, to continue from.
@@ -115,16 +131,16 @@ def _dijkstra(
         if resuming:
             resuming = False
         else:
-            d = keys[0]
-            cur = vals[0]
-            size = _heap_pop(keys, vals, size)
+            d = heap[0, 0]
+            cur = int(heap[0, 1])
+            size = _heap_pop(heap, size)
             if done[cur]:
                 continue
             if d > max_cost:
                 break
             done[cur] = True
             if flat_goals[cur]:
-                return cur, touched, n_touched, keys, vals, size
+                return cur, touched, n_touched, heap, size
         ci = cur // (ny * nz)
         cj = (cur // nz) % ny
         ck = cur % nz
@@ -148,11 +164,9 @@ def _dijkstra(
                     n_touched += 1
                 dist[idx] = nd
                 parent[idx] = cur
-                if size == keys.shape[0]:
-                    keys = np.concatenate((keys, np.empty_like(keys)))
-                    vals = np.concatenate((vals, np.empty_like(vals)))
-                size = _heap_push(keys, vals, size, nd, idx)
-    return -1, touched, n_touched, keys, vals, size
+                heap = _heap_push(heap, size, nd, idx)
+                size += 1
+    return -1, touched, n_touched, heap, size
 
 
 class _Workspace:
@@ -220,14 +234,13 @@ class DistanceField:
         s = int(np.ravel_multi_index(tuple(self.start), self.shape))
         ws.dist[s] = 0.0
         ws.touched[0] = s
-        keys = np.empty(1 << 12, dtype=np.float64)
-        vals = np.empty(1 << 12, dtype=np.int64)
-        count, size = 1, _heap_push(keys, vals, 0, 0.0, s)
+        heap = _heap_push(_new_heap(1 << 12), 0, 0.0, s)
+        count, size = 1, 1
         goal = -1
         while True:
-            goal, ws.touched, count, keys, vals, size = _dijkstra(
+            goal, ws.touched, count, heap, size = _dijkstra(
                 passable, goal_mask, _OFFSETS, _STEP_COST, max_cost_m / voxel_size,
-                ws.dist, ws.parent, ws.done, ws.touched, count, keys, vals, size, goal,
+                ws.dist, ws.parent, ws.done, ws.touched, count, heap, size, goal,
             )
             if goal < 0 or accept is None or accept(
                 np.array(np.unravel_index(goal, self.shape), dtype=np.int64)

@@ -12,7 +12,7 @@ import numpy.typing as npt
 import pytest
 
 from planners.astar import PathCache
-from planners.search import DistanceField, segment_clear, shortcut
+from planners.search import DistanceField, _heap_pop, _heap_push, _new_heap, segment_clear, shortcut
 from planners.waypoints import grid_path, nearest_traversable
 from sim.occupancy import VoxelState
 from tests.planners.conftest import stack_from_state
@@ -70,6 +70,68 @@ def assert_chain(path: npt.NDArray[np.int64], passable: BoolGrid,
 
 
 # -- distances ----------------------------------------------------------------------------------
+
+
+def _swap_heap_order(pushes: list[tuple[float, int]], pops_between: list[int]) -> list[int]:
+    """The reference: a binary heap of two arrays moved by swaps, as the searches' heap was
+    before its rows were interleaved. Returns the values in the order they pop."""
+    keys: list[float] = []
+    vals: list[int] = []
+    out: list[int] = []
+
+    def pop() -> None:
+        out.append(vals[0])
+        keys[0], vals[0] = keys[-1], vals[-1]
+        keys.pop()
+        vals.pop()
+        i, size = 0, len(keys)
+        while 2 * i + 1 < size:
+            c = 2 * i + 1
+            if c + 1 < size and keys[c + 1] < keys[c]:
+                c += 1
+            if keys[i] <= keys[c]:
+                break
+            keys[c], keys[i] = keys[i], keys[c]
+            vals[c], vals[i] = vals[i], vals[c]
+            i = c
+
+    for (key, val), pops in zip(pushes, pops_between, strict=True):
+        keys.append(key)
+        vals.append(val)
+        i = len(keys) - 1
+        while i > 0 and keys[(i - 1) >> 1] > keys[i]:
+            p = (i - 1) >> 1
+            keys[p], keys[i] = keys[i], keys[p]
+            vals[p], vals[i] = vals[i], vals[p]
+            i = p
+        for _ in range(min(pops, len(keys))):
+            pop()
+    while keys:
+        pop()
+    return out
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_heap_pops_ties_in_the_swap_heaps_order(seed: int) -> None:
+    """Which of equal keys pops first decides between paths of equal length: the interleaved
+    heap must pop them as the swap-based heap did, through its growth and interleaved pops."""
+    rng = np.random.default_rng(seed)
+    n = 5000
+    # Few distinct keys, so that most comparisons are ties.
+    pushes = [(float(k), int(v)) for k, v in zip(rng.integers(0, 12, n) * 0.5,
+                                                  rng.permutation(n), strict=True)]
+    pops_between = [int(p) for p in rng.integers(0, 3, n)]
+    heap, size, got = _new_heap(4), 0, []
+    for (key, val), pops in zip(pushes, pops_between, strict=True):
+        heap = _heap_push(heap, size, key, val)
+        size += 1
+        for _ in range(min(pops, size)):
+            got.append(int(heap[0, 1]))
+            size = _heap_pop(heap, size)
+    while size:
+        got.append(int(heap[0, 1]))
+        size = _heap_pop(heap, size)
+    assert got == _swap_heap_order(pushes, pops_between)
 
 
 def test_distances_on_an_open_grid() -> None:
