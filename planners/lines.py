@@ -80,6 +80,13 @@ def _farthest_clear_many(traversable: BoolGrid, free: BoolGrid, a: FloatArray,
     return out
 
 
+def _escape_grid(view: MapView, escaping: bool) -> BoolGrid:
+    """The known-free grid the line tests read while escaping. When not escaping they never
+    read it, so the traversable grid stands in: making the free grid is a pass over the whole
+    map, several times a line test's cost."""
+    return view.free if escaping else view.traversable
+
+
 def reachable_lengths(view: MapView, a: npt.ArrayLike, b: npt.ArrayLike, *,
                       escaping: bool = False) -> FloatArray:
     """(N,) how far (metres) the vehicle can fly in a straight line from `a` ((3,) world)
@@ -87,7 +94,7 @@ def reachable_lengths(view: MapView, a: npt.ArrayLike, b: npt.ArrayLike, *,
     final confirmation); -1 when not even the start qualifies."""
     av = to_voxel_units(view, a)
     bv = np.ascontiguousarray(np.atleast_2d(to_voxel_units(view, b)))
-    t = _farthest_clear_many(view.traversable, view.free, av, bv, escaping)
+    t = _farthest_clear_many(view.traversable, _escape_grid(view, escaping), av, bv, escaping)
     lengths = t * np.linalg.norm(np.atleast_2d(b) - np.asarray(a, dtype=np.float64), axis=1)
     result: FloatArray = np.where(t < 0.0, -1.0, lengths)
     return result
@@ -102,13 +109,14 @@ def farthest_clear_point(view: MapView, a: npt.ArrayLike, b: npt.ArrayLike, *,
     framework allows; off by default, since such a way out may run along a wall whose surface
     the sensor noise left free."""
     av, bv = to_voxel_units(view, a), to_voxel_units(view, b)
-    t = _farthest_clear(view.traversable, view.free, av, bv, escaping)
+    free = _escape_grid(view, escaping)
+    t = _farthest_clear(view.traversable, free, av, bv, escaping)
     if t < 0.0:
         return None
     # The samples of the shorter segment a→(a + t (b - a)) are not those of a→b: confirm it
     # with the framework's own test, backing off a quarter voxel at a time.
     back = 0.25 / max(float(np.linalg.norm(bv - av)), 1e-9)
-    while t > 0.0 and not segment_in_mask(view.traversable, view.free, av,
+    while t > 0.0 and not segment_in_mask(view.traversable, free, av,
                                           av + t * (bv - av), escaping):
         t -= back
     if t <= 0.0:
