@@ -54,13 +54,11 @@ def estimate(runs: list[dict[str, Any]], areas: list[str], *, repeats: int,
 def speed_factors(runs: list[dict[str, Any]], planners: list[str]) -> dict[str, Any]:
     """The least and largest machine speed factor recorded by the seed-0 runs of `planners`
     (`sim.reference_speed`; None when none records one), and how many of them record one."""
-    factors = [float(r["speed_factor"]) for r in runs
-               if r["planner"] in planners and r["seed"] == 0
-               and r.get("cpu_s") is not None and r.get("speed_factor") is not None]
-    counted = sum(1 for r in runs if r["planner"] in planners and r["seed"] == 0
-                  and r.get("cpu_s") is not None)
-    return {"least": min(factors) if factors else None, "largest": max(factors) if factors
-            else None, "recorded": len(factors), "runs": counted}
+    counted = [r for r in runs
+               if r["planner"] in planners and r["seed"] == 0 and r.get("cpu_s") is not None]
+    factors = [float(r["speed_factor"]) for r in counted if r.get("speed_factor") is not None]
+    return {"least": min(factors, default=None), "largest": max(factors, default=None),
+            "recorded": len(factors), "runs": len(counted)}
 
 
 def merged_runs(logs: list[list[dict[str, Any]]]) -> list[dict[str, Any]]:
