@@ -42,7 +42,11 @@ the fingerprint of every built-in planner id. ``tests/test_versions.py`` fails w
 longer matches it:
 
 - a component changed: the benchmark version must be bumped, which
-  ``python -m flybo.versions --write`` does (or ``--write --name NAME``);
+  ``python -m flybo.versions --write`` does (or ``--write --name NAME``). Only a change of the
+  ``sim`` sources that leaves every flight and every measure bit-identical (a refactor, such as a
+  faster kernel computing the same numbers) keeps the name: ``--write --refactor``. The stored
+  flight fingerprints (``tests/sim/episode_fingerprints.py``) are the evidence it must pass; a
+  changed preset, area or library is never a refactor;
 - a planner's fingerprint changed: its id must keep the code its results were made with, so
   the change is registered as a new version beside it (``planners/builtin.py``); a change that
   leaves every result bit-identical (a refactor) is accepted with ``--write``;
@@ -81,6 +85,7 @@ from flybo.module_sources import package_sources, read_source
 __all__ = [
     "COMPONENTS",
     "LOCK_PATH",
+    "REFACTORABLE",
     "WRITE_COMMAND",
     "benchmark_version",
     "check_lock",
@@ -99,6 +104,11 @@ __all__ = [
 
 LOCK_PATH = Path(__file__).with_name("benchmark.lock.json")
 WRITE_COMMAND = "python -m flybo.versions --write"
+
+# The components whose sources may change without a new version when every result stays
+# bit-identical (`write_lock(refactor=True)`): the simulator's code. Presets and areas are the
+# benchmark's definition, and another library release is other code.
+REFACTORABLE = frozenset({"sim"})
 
 _VERSION_NAME = re.compile(r"^(?P<year>\d{4})\.(?P<month>\d{2})-(?P<serial>\d+)$")
 
@@ -175,7 +185,9 @@ def check_lock(lock: dict[str, Any], components: dict[str, str],
             f"component {component!r} changed since benchmark version {name}, which was not "
             f"bumped (lock {str(locked_components.get(component))[:12]}, tree "
             f"{str(components.get(component))[:12]}): bump it to {next_version(name)} with "
-            f"`{WRITE_COMMAND}` (or choose the name: `{WRITE_COMMAND} --name NAME`)")
+            f"`{WRITE_COMMAND}` (or choose the name: `{WRITE_COMMAND} --name NAME`)"
+            + (f"; only if every result stays bit-identical (a refactor), keep the name with "
+               f"`{WRITE_COMMAND} --refactor`" if component in REFACTORABLE else ""))
     locked_planners = dict(lock.get("planners", {}))
     known = set(locked_planners) | set(planners)
     for planner_id in sorted(known):
@@ -201,16 +213,19 @@ def _write(path: Path, content: dict[str, Any]) -> None:
 
 
 def write_lock(path: Path | None = None, *, name: str | None = None,
-               allow_removal: bool = False, today: datetime.date | None = None) -> list[str]:
+               allow_removal: bool = False, refactor: bool = False,
+               today: datetime.date | None = None) -> list[str]:
     """Bring the lock file (`LOCK_PATH` unless `path`) up to date with the tree; the lines say
     what changed.
 
     The version name is bumped (`next_version`) when a component changed, unless `name` is
-    given.
+    given, or `refactor` is set and only components in `REFACTORABLE` changed: then the name
+    stays, the change being declared bit-identical in every result.
 
     Raises:
         ValueError: a planner id would be removed without `allow_removal`, or `name` is the
-            lock's name although a component changed, or is not of the form YYYY.MM-N.
+            lock's name although a component changed, or is not of the form YYYY.MM-N, or
+            `refactor` is set with `name` or with a changed component outside `REFACTORABLE`.
     """
     path = path or LOCK_PATH
     old = load_lock(path) or {}
@@ -224,6 +239,13 @@ def write_lock(path: Path | None = None, *, name: str | None = None,
         raise ValueError(f"planner ids {', '.join(removed)} are locked but no longer registered; "
                          "register them again, or pass --allow-removal if they were never "
                          "released")
+    if refactor:
+        if name is not None:
+            raise ValueError("a refactor keeps the version name: give --refactor or --name")
+        definition = [c for c in changed if c not in REFACTORABLE]
+        if definition:
+            raise ValueError(f"{', '.join(definition)} changed: what a run flies or measures "
+                             f"changed, which is never a refactor; bump the version")
     if name is not None:
         if not _VERSION_NAME.match(name):
             raise ValueError(f"benchmark version {name!r} is not of the form YYYY.MM-N")
@@ -231,13 +253,15 @@ def write_lock(path: Path | None = None, *, name: str | None = None,
             raise ValueError(f"{', '.join(changed)} changed: the benchmark version must change "
                              f"from {old_name}")
         new_name = name
-    elif changed or not _VERSION_NAME.match(old_name):
+    elif (changed and not refactor) or not _VERSION_NAME.match(old_name):
         new_name = next_version(old_name, today)
     else:
         new_name = old_name
     lines = []
     for component in changed:
         what = "new" if component not in old_components else "changed"
+        if refactor and component in old_components:
+            what = "changed, accepted as a refactor"
         lines.append(f"component {component}: {what} ({str(old_components.get(component))[:12]}"
                      f" -> {components[component][:12]})")
     for planner_id in sorted(set(old_planners) | set(planners)):
@@ -271,14 +295,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--name", help="with --write: the new benchmark version name")
     parser.add_argument("--allow-removal", action="store_true",
                         help="with --write: drop locked planner ids that are no longer registered")
+    parser.add_argument("--refactor", action="store_true",
+                        help="with --write: keep the version name for a change of the simulator's "
+                        "sources that leaves every result bit-identical")
     parser.add_argument("--lock", type=Path, default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     lock_path: Path = args.lock or LOCK_PATH
-    if (args.name or args.allow_removal) and not args.write:
-        parser.error("--name and --allow-removal go with --write")
+    if (args.name or args.allow_removal or args.refactor) and not args.write:
+        parser.error("--name, --allow-removal and --refactor go with --write")
     if args.write:
         try:
-            lines = write_lock(lock_path, name=args.name, allow_removal=args.allow_removal)
+            lines = write_lock(lock_path, name=args.name, allow_removal=args.allow_removal,
+                               refactor=args.refactor)
         except ValueError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 1

@@ -55,28 +55,34 @@ def _clearance_box(
     far = np.int32(3 * (2 * margin + 1) ** 2)  # beyond any distance the radius test looks at
     depth = hi2 - lo2
     best = np.empty(depth, dtype=np.int32)
-    blocked = np.empty(depth + 2 * margin, dtype=np.bool_)
     sq = np.empty(2 * margin + 1, dtype=np.int32)
     for d in range(-margin, margin + 1):
         sq[d + margin] = 0 if d == 0 else (2 * abs(d) - 1) ** 2
-    # Loops keep z innermost and the window offset outside it, so the compiler vectorises them.
-    # Pass 1 over z, on the box grown by the margin in x and y (clipped to the grid).
+    # Loops keep z innermost and the window offset outside it, and select rather than branch,
+    # so the compiler vectorises them.
+    # Pass 1 over z, on the box grown by the margin in x and y (clipped to the grid). `cost`
+    # is a column's window: 0 at an obstacle, `far` at a FREE voxel, so max(term, cost) is the
+    # term at obstacles and `far` elsewhere. Its cells beyond the grid stay 0 (obstacles).
     a0 = max(lo0 - margin, 0)
     a1 = max(lo1 - margin, 0)
     b0 = min(hi0 + margin, nx)
     b1 = min(hi1 + margin, ny)
+    k0 = max(lo2 - margin, 0)
+    k1 = min(hi2 + margin, nz)
+    t0 = k0 - (lo2 - margin)
+    cost = np.zeros(depth + 2 * margin, dtype=np.int32)
     g1 = np.empty((b0 - a0, b1 - a1, depth), dtype=np.int32)
     for i in range(a0, b0):
         for j in range(a1, b1):
-            for t in range(depth + 2 * margin):
-                k = lo2 - margin + t
-                blocked[t] = k < 0 or k >= nz or state[i, j, k] != _FREE
-            best[:] = far
-            for d in range(-margin, margin + 1):
-                term = sq[d + margin]
+            column = state[i, j]
+            for k in range(k0, k1):
+                cost[t0 + k - k0] = far if column[k] == _FREE else 0
+            for k in range(depth):
+                best[k] = max(sq[0], cost[k])
+            for d in range(1, 2 * margin + 1):
+                term = sq[d]
                 for k in range(depth):
-                    if blocked[k + margin + d]:
-                        best[k] = min(best[k], term)
+                    best[k] = min(best[k], max(term, cost[k + d]))
             g1[i - a0, j - a1, :] = best
     # Pass 2 over y, on the box grown in x.
     g2 = np.empty((b0 - a0, hi1 - lo1, depth), dtype=np.int32)

@@ -170,6 +170,34 @@ def test_write_creates_bumps_and_refuses_removals(
     assert write_lock(path, allow_removal=True) == ["planner ghost-v1: removed"]
 
 
+def test_a_simulator_refactor_keeps_the_name_and_nothing_else_does(
+    tree: dict[str, Any], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    path = tmp_path / "lock.json"
+    write_lock(path, name="2026.12-7")
+    monkeypatch.setitem(fingerprints._COMPONENT_HASHES, "sim", lambda: "7" * 64)
+    problems = check_lock(load_lock(path) or {}, component_hashes(), tree["planners"])
+    assert len(problems) == 1 and "--refactor" in problems[0]
+    with pytest.raises(ValueError, match="keeps the version name"):
+        write_lock(path, name="2026.12-8", refactor=True)
+    assert versions.main(["--write", "--refactor", "--lock", str(path)]) == 0
+    assert "component sim: changed, accepted as a refactor" in capsys.readouterr().out
+    lock = load_lock(path)
+    assert lock is not None and lock["benchmark_version"] == "2026.12-7"
+    assert lock["components"]["sim"] == "7" * 64
+    assert check_lock(lock, component_hashes(), tree["planners"]) == []
+
+    monkeypatch.setitem(fingerprints._COMPONENT_HASHES, "presets", lambda: "8" * 64)
+    problems = check_lock(lock, component_hashes(), tree["planners"])
+    assert len(problems) == 1 and "--refactor" not in problems[0]
+    with pytest.raises(ValueError, match="presets changed: what a run flies or measures"):
+        write_lock(path, refactor=True)
+    assert load_lock(path) == lock  # refused: nothing written
+    with pytest.raises(SystemExit):
+        versions.main(["--check", "--refactor", "--lock", str(path)])
+
+
 def test_command_line_check_and_write(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "lock.json"
     assert versions.main(["--check", "--lock", str(path)]) == 1

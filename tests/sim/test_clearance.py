@@ -10,7 +10,7 @@ import numpy.typing as npt
 import pytest
 from scipy.spatial import cKDTree
 
-from sim.clearance import TraversabilityTracker, guaranteed_clearance_m
+from sim.clearance import TraversabilityTracker, _clearance_box, guaranteed_clearance_m
 from sim.config import EpisodeConfig
 from sim.occupancy import OccupancyMap, VoxelState
 from sim.search_checks import plan_is_clear, segment_cube_sq, starts_traversable
@@ -110,6 +110,28 @@ def test_incremental_updates_match_the_reference(radius_m: float) -> None:
             np.testing.assert_array_equal(
                 tracker.traversable, reference_traversable(m.state, m.voxel_size, radius_m))
     assert tracker.traversable.any()
+
+
+@pytest.mark.parametrize(("voxel_size", "margin"), [(0.1, 4), (0.2, 2)])
+def test_any_box_is_written_as_the_reference_and_nothing_outside_it(voxel_size: float,
+                                                                     margin: int) -> None:
+    """The kernel on boxes anywhere in the grid, touching its faces or not, and on every depth
+    of z: inside the box the reference, outside it untouched."""
+    rng = np.random.default_rng(11)
+    state = random_state(rng, (30, 26, 21), obstacles=0.01)
+    expected = reference_traversable(state, voxel_size, 0.45)
+    tracker = TraversabilityTracker(map_with(state, voxel_size), 0.45)
+    assert tracker._margin == margin
+    for _ in range(40):
+        lo = rng.integers(0, state.shape)
+        hi = lo + 1 + rng.integers(0, np.array(state.shape) - lo)
+        out = np.zeros(state.shape, dtype=bool)
+        _clearance_box(state, out, int(lo[0]), int(lo[1]), int(lo[2]), int(hi[0]), int(hi[1]),
+                       int(hi[2]), tracker._margin, tracker._min_sq4)
+        inside = (slice(lo[0], hi[0]), slice(lo[1], hi[1]), slice(lo[2], hi[2]))
+        np.testing.assert_array_equal(out[inside], expected[inside])
+        out[inside] = False
+        assert not out.any()
 
 
 def test_a_centre_exactly_the_radius_from_a_cube_is_traversable() -> None:
