@@ -25,51 +25,84 @@ def clusters(view: MapView, min_size: int) -> list[FrontierCluster]:
 
 
 @numba.njit(cache=True)
+def _neighbour_offsets(ny: int, nz: int) -> IndexArray:
+    """(26,) flat C-order offsets of a voxel's 26 neighbours in a grid of (.., ny, nz)."""
+    offsets = np.empty(26, dtype=np.int64)
+    n = 0
+    for dx in range(-1, 2):
+        for dy in range(-1, 2):
+            for dz in range(-1, 2):
+                if dx != 0 or dy != 0 or dz != 0:
+                    offsets[n] = (dx * ny + dy) * nz + dz
+                    n += 1
+    return offsets
+
+
+@numba.njit(cache=True)
 def _grouped_voxels(frontier: npt.NDArray[np.bool_], lo: IndexArray, hi: IndexArray,
                     min_size: int) -> IndexArray:
     """(K, 3) indices, in C order, of the frontier voxels of the box [lo, hi) whose 26-connected
     group of frontier voxels inside the box has at least `min_size` voxels.
 
-    The groups are grown from the frontier voxels only (a breadth-first search), so the cost
-    follows the frontier's size in the box, not the box's volume."""
+    The box is copied once into a flat label grid with a one-voxel border of zeros (-1 marks a
+    frontier voxel not yet reached, g > 0 its group), so a neighbour is one read at a fixed
+    offset, with no bounds to test. Groups are grown breadth-first from the frontier voxels as
+    the scan meets them in C order, which also lists the voxels in C order: the output is read
+    off that list, not off a second scan of the box."""
     sx, sy, sz = hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]
-    group = np.zeros((sx, sy, sz), dtype=np.int32)  # 0: not yet reached
+    py, pz = sy + 2, sz + 2
+    label = np.zeros((sx + 2) * py * pz, dtype=np.int32)
+    count = 0
+    for x in range(sx):
+        for y in range(sy):
+            row = frontier[lo[0] + x, lo[1] + y, lo[2]:hi[2]]
+            base = ((x + 1) * py + y + 1) * pz + 1
+            for z in range(sz):
+                label[base + z] = -np.int32(row[z])
+                count += row[z]
+    offsets = _neighbour_offsets(py, pz)
     sizes = [0]  # sizes[g]: voxels of group g
-    queue = np.empty(sx * sy * sz, dtype=np.int64)
+    queue = np.empty(count, dtype=np.int64)
+    cells = np.empty(count, dtype=np.int64)  # the frontier voxels' labels' positions, C order
+    n = 0
     kept = 0
     for x in range(sx):
         for y in range(sy):
+            row = frontier[lo[0] + x, lo[1] + y, lo[2]:hi[2]]
+            base = ((x + 1) * py + y + 1) * pz + 1
             for z in range(sz):
-                if group[x, y, z] != 0 or not frontier[lo[0] + x, lo[1] + y, lo[2] + z]:
+                if not row[z]:
                     continue
-                g = len(sizes)
-                group[x, y, z] = g
-                queue[0] = (x * sy + y) * sz + z
-                head, tail = 0, 1
-                while head < tail:
-                    q = queue[head]
-                    head += 1
-                    qx, qy, qz = q // (sy * sz), (q // sz) % sy, q % sz
-                    for dx in range(max(qx - 1, 0), min(qx + 2, sx)):
-                        for dy in range(max(qy - 1, 0), min(qy + 2, sy)):
-                            for dz in range(max(qz - 1, 0), min(qz + 2, sz)):
-                                if group[dx, dy, dz] == 0 and \
-                                        frontier[lo[0] + dx, lo[1] + dy, lo[2] + dz]:
-                                    group[dx, dy, dz] = g
-                                    queue[tail] = (dx * sy + dy) * sz + dz
-                                    tail += 1
-                sizes.append(tail)
-                if tail >= min_size:
-                    kept += tail
+                p = base + z
+                if label[p] == -1:
+                    g = np.int32(len(sizes))
+                    label[p] = g
+                    queue[0] = p
+                    head, tail = 0, 1
+                    while head < tail:
+                        q = queue[head]
+                        head += 1
+                        for o in range(26):
+                            r = q + offsets[o]
+                            if label[r] == -1:
+                                label[r] = g
+                                queue[tail] = r
+                                tail += 1
+                    sizes.append(tail)
+                    if tail >= min_size:
+                        kept += tail
+                cells[n] = p
+                n += 1
     out = np.empty((kept, 3), dtype=np.int64)
-    n = 0
-    for x in range(sx):
-        for y in range(sy):
-            for z in range(sz):
-                g = group[x, y, z]
-                if g != 0 and sizes[g] >= min_size:
-                    out[n, 0], out[n, 1], out[n, 2] = lo[0] + x, lo[1] + y, lo[2] + z
-                    n += 1
+    m = 0
+    for c in range(count):
+        p = cells[c]
+        if sizes[label[p]] >= min_size:
+            q = p // pz
+            out[m, 0] = lo[0] + q // py - 1
+            out[m, 1] = lo[1] + q % py - 1
+            out[m, 2] = lo[2] + p % pz - 1
+            m += 1
     return out
 
 
