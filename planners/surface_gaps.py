@@ -26,12 +26,12 @@ _OCCUPIED = np.uint8(VoxelState.OCCUPIED)
 
 
 @numba.njit(cache=True)
-def _gap_mask(state: StateGrid, gap: int) -> npt.NDArray[np.bool_]:
-    """(nx, ny, nz) True between consecutive occupied voxels at most `gap` + 1 apart along
-    any axis (pairs further apart are covered by consecutive ones). One pass in memory order,
-    keeping the last occupied index seen along each axis."""
+def _close_gaps(state: StateGrid, gap: int, closed: StateGrid, fill: np.uint8) -> None:
+    """Set `closed` (nx, ny, nz) to `fill` between consecutive occupied voxels of `state` at
+    most `gap` + 1 apart along any axis (pairs further apart are covered by consecutive ones).
+    One pass over `state` in memory order, keeping the last occupied index seen along each
+    axis; `closed` is written only in the gaps, so it starts as a copy of `state`."""
     nx, ny, nz = state.shape
-    mask = np.zeros(state.shape, dtype=np.bool_)
     last_i = np.full((ny, nz), -1, dtype=np.int64)
     last_j = np.empty(nz, dtype=np.int64)
     for i in range(nx):
@@ -42,15 +42,14 @@ def _gap_mask(state: StateGrid, gap: int) -> npt.NDArray[np.bool_]:
                 if state[i, j, k] != _OCCUPIED:
                     continue
                 if last_k >= 0 and 1 < k - last_k <= gap + 1:
-                    mask[i, j, last_k + 1:k] = True
+                    closed[i, j, last_k + 1:k] = fill
                 if last_j[k] >= 0 and 1 < j - last_j[k] <= gap + 1:
-                    mask[i, last_j[k] + 1:j, k] = True
+                    closed[i, last_j[k] + 1:j, k] = fill
                 if last_i[j, k] >= 0 and 1 < i - last_i[j, k] <= gap + 1:
-                    mask[last_i[j, k] + 1:i, j, k] = True
+                    closed[last_i[j, k] + 1:i, j, k] = fill
                 last_k = k
                 last_j[k] = j
                 last_i[j, k] = i
-    return mask
 
 
 def close_surface_gaps(state: StateGrid, gap_voxels: int,
@@ -58,7 +57,7 @@ def close_surface_gaps(state: StateGrid, gap_voxels: int,
     """(nx, ny, nz) copy of `state` with the gaps of at most `gap_voxels` voxels between two
     occupied voxels along any axis set to `fill` (OCCUPIED, or `CLOSED_GAP` for a gain that
     tells surfaces it could reconstruct from closed gaps). Linear in the grid's size."""
-    closed = state.copy()
+    closed = np.ascontiguousarray(state).copy()
     if gap_voxels > 0:
-        closed[_gap_mask(np.ascontiguousarray(state), gap_voxels)] = fill
+        _close_gaps(np.ascontiguousarray(state), gap_voxels, closed, np.uint8(fill))
     return closed
