@@ -20,6 +20,7 @@ from planners.search import (
     BoolGrid,
     IndexArray,
     _corner_free,
+    _doubled,
     _heap_pop,
     _heap_push,
     _new_heap,
@@ -68,7 +69,7 @@ def _astar(
     g[s] = 0.0
     touched[0] = s
     n_touched = 1
-    heap = _heap_push(heap, 0, _octile(start[0], start[1], start[2], gi, gj, gk), s)
+    _heap_push(heap, 0, _octile(start[0], start[1], start[2], gi, gj, gk), s)
     size = 1
     found = False
     while size > 0:
@@ -80,6 +81,12 @@ def _astar(
         if cur == target:
             found = True
             break
+        # Room for every push and every newly touched voxel of this expansion (see
+        # `planners.search`: no array is replaced inside the neighbour loop).
+        if size + offsets.shape[0] > heap.shape[0]:
+            heap = _doubled(heap)
+        if n_touched + offsets.shape[0] > touched.shape[0]:
+            touched = _doubled(touched)
         ci = cur // (ny * nz)
         cj = (cur // nz) % ny
         ck = cur % nz
@@ -98,13 +105,11 @@ def _astar(
             ng = g_cur + step_cost[n]
             if ng < g[idx]:
                 if g[idx] == np.inf:
-                    if n_touched == touched.shape[0]:
-                        touched = np.concatenate((touched, np.empty_like(touched)))
                     touched[n_touched] = idx
                     n_touched += 1
                 g[idx] = ng
                 parent[idx] = cur
-                heap = _heap_push(heap, size, ng + _octile(i, j, k, gi, gj, gk), idx)
+                _heap_push(heap, size, ng + _octile(i, j, k, gi, gj, gk), idx)
                 size += 1
     if not found:
         return np.zeros((0, 3), dtype=np.int64), np.inf, touched, n_touched

@@ -9,6 +9,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from functools import cached_property
+from typing import Any
 
 import numba
 import numpy as np
@@ -31,7 +32,10 @@ _STEP_COST = np.sqrt(np.sum(_OFFSETS**2, axis=1)).astype(np.float64)
 # A search's priority queue: a binary min-heap of (key, voxel) rows in one (M, 2) float64 array,
 # the flat voxel index stored as a float (exact below 2^53), so that each level of a sift reads
 # one cache line rather than one in each of two arrays. Ties pop in the order of the classic
-# swap-based heap: the hole-moving sifts below make the same moves.
+# swap-based heap: the hole-moving sifts below make the same moves. A search makes room once per
+# expanded voxel (`_doubled` when fewer than 26 rows are free) and pushes without a check: an
+# array that a push may replace is reloaded, and its reference counted, at every push, which
+# cost a fifth of a large search.
 HeapArray = npt.NDArray[np.float64]
 
 
@@ -41,10 +45,14 @@ def _new_heap(rows: int) -> HeapArray:
 
 
 @numba.njit(cache=True)
-def _heap_push(heap: HeapArray, size: int, key: float, val: int) -> HeapArray:
-    """Push (key, val); returns the heap (doubled when it was full). The size grows by one."""
-    if size == heap.shape[0]:
-        heap = np.concatenate((heap, np.empty_like(heap)))
+def _doubled(a: npt.NDArray[Any]) -> npt.NDArray[Any]:
+    """`a` with as many rows again after its own (uninitialised)."""
+    return np.concatenate((a, np.empty_like(a)))
+
+
+@numba.njit(cache=True)
+def _heap_push(heap: HeapArray, size: int, key: float, val: int) -> None:
+    """Push (key, val) into a heap with room for it (size < rows); the size grows by one."""
     i = size
     while i > 0:
         p = (i - 1) >> 1
@@ -55,7 +63,6 @@ def _heap_push(heap: HeapArray, size: int, key: float, val: int) -> HeapArray:
         i = p
     heap[i, 0] = key
     heap[i, 1] = val
-    return heap
 
 
 @numba.njit(cache=True)
@@ -141,6 +148,11 @@ def _dijkstra(
             done[cur] = True
             if flat_goals[cur]:
                 return cur, touched, n_touched, heap, size
+        # Room for every push and every newly touched voxel of this expansion.
+        if size + offsets.shape[0] > heap.shape[0]:
+            heap = _doubled(heap)
+        if n_touched + offsets.shape[0] > touched.shape[0]:
+            touched = _doubled(touched)
         ci = cur // (ny * nz)
         cj = (cur // nz) % ny
         ck = cur % nz
@@ -158,13 +170,11 @@ def _dijkstra(
             nd = d + step_cost[n]
             if nd < dist[idx]:
                 if dist[idx] == np.inf:
-                    if n_touched == touched.shape[0]:
-                        touched = np.concatenate((touched, np.empty_like(touched)))
                     touched[n_touched] = idx
                     n_touched += 1
                 dist[idx] = nd
                 parent[idx] = cur
-                heap = _heap_push(heap, size, nd, idx)
+                _heap_push(heap, size, nd, idx)
                 size += 1
     return -1, touched, n_touched, heap, size
 
@@ -234,7 +244,8 @@ class DistanceField:
         s = int(np.ravel_multi_index(tuple(self.start), self.shape))
         ws.dist[s] = 0.0
         ws.touched[0] = s
-        heap = _heap_push(_new_heap(1 << 12), 0, 0.0, s)
+        heap = _new_heap(1 << 12)
+        _heap_push(heap, 0, 0.0, s)
         count, size = 1, 1
         goal = -1
         while True:

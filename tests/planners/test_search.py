@@ -12,7 +12,15 @@ import numpy.typing as npt
 import pytest
 
 from planners.astar import PathCache
-from planners.search import DistanceField, _heap_pop, _heap_push, _new_heap, segment_clear, shortcut
+from planners.search import (
+    DistanceField,
+    _doubled,
+    _heap_pop,
+    _heap_push,
+    _new_heap,
+    segment_clear,
+    shortcut,
+)
 from planners.waypoints import grid_path, nearest_traversable
 from sim.occupancy import VoxelState
 from tests.planners.conftest import stack_from_state
@@ -123,7 +131,9 @@ def test_the_heap_pops_ties_in_the_swap_heaps_order(seed: int) -> None:
     pops_between = [int(p) for p in rng.integers(0, 3, n)]
     heap, size, got = _new_heap(4), 0, []
     for (key, val), pops in zip(pushes, pops_between, strict=True):
-        heap = _heap_push(heap, size, key, val)
+        if size == heap.shape[0]:
+            heap = _doubled(heap)
+        _heap_push(heap, size, key, val)
         size += 1
         for _ in range(min(pops, size)):
             got.append(int(heap[0, 1]))
