@@ -20,7 +20,7 @@ from planners.search import (
     BoolGrid,
     IndexArray,
     _corner_free,
-    _doubled,
+    _grown,
     _heap_pop,
     _heap_push,
     _new_heap,
@@ -84,9 +84,9 @@ def _astar(
         # Room for every push and every newly touched voxel of this expansion (see
         # `planners.search`: no array is replaced inside the neighbour loop).
         if size + offsets.shape[0] > heap.shape[0]:
-            heap = _doubled(heap)
+            heap = _grown(heap, size + offsets.shape[0])
         if n_touched + offsets.shape[0] > touched.shape[0]:
-            touched = _doubled(touched)
+            touched = _grown(touched, n_touched + offsets.shape[0])
         ci = cur // (ny * nz)
         cj = (cur // nz) % ny
         ck = cur % nz

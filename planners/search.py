@@ -33,7 +33,7 @@ _STEP_COST = np.sqrt(np.sum(_OFFSETS**2, axis=1)).astype(np.float64)
 # the flat voxel index stored as a float (exact below 2^53), so that each level of a sift reads
 # one cache line rather than one in each of two arrays. Ties pop in the order of the classic
 # swap-based heap: the hole-moving sifts below make the same moves. A search makes room once per
-# expanded voxel (`_doubled` when fewer than 26 rows are free) and pushes without a check: an
+# expanded voxel (`_grown` when fewer than 26 rows are free) and pushes without a check: an
 # array that a push may replace is reloaded, and its reference counted, at every push, which
 # cost a fifth of a large search.
 HeapArray = npt.NDArray[np.float64]
@@ -45,9 +45,11 @@ def _new_heap(rows: int) -> HeapArray:
 
 
 @numba.njit(cache=True)
-def _doubled(a: npt.NDArray[Any]) -> npt.NDArray[Any]:
-    """`a` with as many rows again after its own (uninitialised)."""
-    return np.concatenate((a, np.empty_like(a)))
+def _grown(a: npt.NDArray[Any], rows: int) -> npt.NDArray[Any]:
+    """`a` followed by uninitialised rows, doubled until it has at least `rows` rows."""
+    while a.shape[0] < rows:
+        a = np.concatenate((a, np.empty_like(a)))
+    return a
 
 
 @numba.njit(cache=True)
@@ -150,9 +152,9 @@ def _dijkstra(
                 return cur, touched, n_touched, heap, size
         # Room for every push and every newly touched voxel of this expansion.
         if size + offsets.shape[0] > heap.shape[0]:
-            heap = _doubled(heap)
+            heap = _grown(heap, size + offsets.shape[0])
         if n_touched + offsets.shape[0] > touched.shape[0]:
-            touched = _doubled(touched)
+            touched = _grown(touched, n_touched + offsets.shape[0])
         ci = cur // (ny * nz)
         cj = (cur // nz) % ny
         ck = cur % nz

@@ -14,7 +14,7 @@ import pytest
 from planners.astar import PathCache
 from planners.search import (
     DistanceField,
-    _doubled,
+    _grown,
     _heap_pop,
     _heap_push,
     _new_heap,
@@ -131,8 +131,7 @@ def test_the_heap_pops_ties_in_the_swap_heaps_order(seed: int) -> None:
     pops_between = [int(p) for p in rng.integers(0, 3, n)]
     heap, size, got = _new_heap(4), 0, []
     for (key, val), pops in zip(pushes, pops_between, strict=True):
-        if size == heap.shape[0]:
-            heap = _doubled(heap)
+        heap = _grown(heap, size + 1)
         _heap_push(heap, size, key, val)
         size += 1
         for _ in range(min(pops, size)):
