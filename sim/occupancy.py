@@ -191,6 +191,10 @@ class OccupancyMap:
         # is `sim.occupancy_kernels`').
         self._voxels = np.zeros((self._log_odds.size, 2), dtype=np.uint32)
         self._voxels[:, 0] = FRESH_TAG
+        # One bit per voxel (flat index v: byte v >> 3, bit v & 7), set where the returns word
+        # is `SETTLED`: most voxels a ray crosses are, and the bits of a region fit in the cache
+        # where their words do not.
+        self._settled = np.zeros((self._log_odds.size + 7) // 8, dtype=np.uint8)
         self._batch = 0
         self._last_touched: IndexBox | None = None
         self._subscriptions: weakref.WeakSet[DirtyBoxSubscription] = weakref.WeakSet()
@@ -296,7 +300,8 @@ class OccupancyMap:
                 cfg.log_odds_hit, cfg.log_odds_miss, cfg.clamp_min, cfg.clamp_max,
                 cfg.occupied_threshold, cfg.miss_radius_m / self._voxel_size,
                 _NOISE_SIGMAS if noise.enabled else 0.0, noise.sigma_a, noise.sigma_b, noise.z0,
-                MIN_RETURNS, _WINDOW, touched, changed, self._voxels, self._batch,
+                MIN_RETURNS, _WINDOW, touched, changed, self._voxels, self._settled,
+                self._batch,
             )
         )
         self._known += newly

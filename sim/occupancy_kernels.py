@@ -197,7 +197,7 @@ def integrate_rays(
     miss_radius: float, noise_sigmas: float, noise_a: float, noise_b: float, noise_z0: float,
     min_returns: int, window: int,
     touched: IndexArray, changed: IndexArray,
-    voxels: npt.NDArray[np.uint32], batch: int,
+    voxels: npt.NDArray[np.uint32], settled: npt.NDArray[np.uint8], batch: int,
 ) -> int:
     """Update the grid with a batch of rays sharing one origin (one depth frame).
 
@@ -220,6 +220,8 @@ def integrate_rays(
     and its returns (layout above; `FRESH_TAG` and 0 for a voxel never touched). `batch` must
     grow from call to call and stay below 2^30 (tags 4*batch: hit pending, 4*batch+1: miss
     applied, 4*batch+2: hit applied, 4*batch+3: hit applied and return recorded).
+    `settled` (ceil(nx*ny*nz / 8),) uint8 holds one bit per voxel (byte v >> 3, bit v & 7 of
+    flat index v), set exactly where the returns word is `SETTLED` (all clear for a new map).
 
     Args:
         origin: (3,) float64 sensor position, world metres.
@@ -274,7 +276,11 @@ def integrate_rays(
         ey = math.floor(by)
         ez = math.floor(bz)
         if 0 <= ex < nx and 0 <= ey < ny and 0 <= ez < nz:
-            words[2 * ((ex * ny + ey) * nz + ez)] = hit_tag
+            v = (ex * ny + ey) * nz + ez
+            words[2 * v] = hit_tag
+            # A hit voxel leaves SETTLED in this batch (its return is recorded below): its bit
+            # is cleared now, so that the second pass does not step over it.
+            settled[v >> 3] &= np.uint8(255 ^ (1 << (v & 7)))
     for r in range(endpoints.shape[0]):
         bx = (endpoints[r, 0] - grid_origin[0]) / voxel_size
         by = (endpoints[r, 1] - grid_origin[1]) / voxel_size
@@ -294,8 +300,17 @@ def integrate_rays(
         length = 0.0
         first_change = -1
         last_change = -1
-        # Inline rather than a per-voxel function call: this loop is the hot path.
-        for c in range(count):
+        # Inline rather than a per-voxel function call: this loop is the hot path. Most voxels
+        # a ray crosses are free space settled at the floor, where no miss acts and (their bits
+        # cleared above) no hit falls: a tight loop over `settled` steps over them before the
+        # full body, which the other voxels go through.
+        c = -1
+        while True:
+            c += 1
+            while c < count and (settled[buf[c] >> 3] >> (buf[c] & 7)) & 1:
+                c += 1
+            if c >= count:
+                break
             v = buf[c]
             tag = np.int64(words[2 * v])
             returns = np.int64(0)
@@ -354,6 +369,7 @@ def integrate_rays(
             if delta < 0.0 and new <= floor_l:
                 # A miss drove the voxel to the floor: it forgets its returns.
                 words[2 * v + 1] = SETTLED
+                settled[v >> 3] |= np.uint8(1 << (v & 7))
             # The state follows the stored float32, so state == (log_odds > threshold).
             s_new = _OCCUPIED if new > threshold else _FREE
             s_old = flat_s[v]

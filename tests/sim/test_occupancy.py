@@ -616,3 +616,43 @@ def test_the_kernel_matches_a_reference_of_the_rule_on_random_frames() -> None:
     assert protected_misses > 0
     assert min(tally) > 0, tally
     assert np.count_nonzero(ref["count"] >= 2) > 5
+
+
+def settled_bits(m: OccupancyMap) -> npt.NDArray[np.bool_]:
+    """(nx, ny, nz) the map's bits of voxels whose returns word is SETTLED."""
+    size = int(np.prod(m.shape))
+    return np.unpackbits(m._settled, bitorder="little")[:size].astype(bool).reshape(m.shape)
+
+
+def test_the_settled_bits_mark_exactly_the_voxels_at_the_floor() -> None:
+    """The kernel steps over voxels by their bits: a bit is set exactly where a miss drove the
+    voxel to the floor and no hit has come since, including a hit in the batch that follows a
+    ray passing through the voxel before the ray that returns in it."""
+    rng = np.random.default_rng(5)
+    m = OccupancyMap(ORIGIN, (14, 12, 8), VOXEL, OccupancyConfig(miss_radius_m=0.04))
+    floor = np.float32(m.config.clamp_min)
+    size = np.array(m.shape) * VOXEL
+    surface = m.origin + rng.uniform(0.1, size - 0.1, size=(6, 3))
+    for _ in range(80):
+        origin = m.origin + rng.uniform(-0.3, size + 0.3)
+        n = int(rng.integers(5, 60))
+        hit = rng.random(n) < 0.3
+        ends = np.where(hit[:, None],
+                        surface[rng.integers(len(surface), size=n)] + rng.normal(0.0, 0.02, (n, 3)),
+                        rng.uniform(m.origin - 0.2, m.origin + size + 0.2, size=(n, 3)))
+        m.integrate(origin, ends, hit)
+        np.testing.assert_array_equal(settled_bits(m), m.log_odds == floor)
+    assert settled_bits(m).any()
+
+    line = line_map()
+    p = np.array([2.55, 1.05, 1.05])
+    idx = (25, 10, 10)
+    origin = p - np.array([2.0, 0.0, 0.0])
+    while line.log_odds[idx] > floor:
+        line.integrate(origin, [p + 1.0 * X], [False])
+    assert settled_bits(line)[idx]
+    # The first ray passes through the voxel, the second returns in it: the hit wins.
+    line.integrate(origin, [p + 1.0 * X, p + 0.03 * X], [False, True])
+    assert not settled_bits(line)[idx]
+    assert line.state[idx] == VoxelState.OCCUPIED
+    assert line.returns([idx])[1][0] == 1
