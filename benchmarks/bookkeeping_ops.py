@@ -1,7 +1,7 @@
 """A run's bookkeeping at its end, each operation beside the one it replaced, on the same state.
 
     taskset -c 0 .venv/bin/python benchmarks/bookkeeping_ops.py [--areas offices-a warehouse
-        facility-c] [--seconds plateau] [--repeats 3]
+        facility-c] [--seconds plateau] [--repeats 3] [--baseline DIR]
 
 Flies Classic (default preset, seed 0) for each area's plateau time (or `--seconds`), then,
 on the run's final TSDF and mesh, times each operation and its reference, alternating, the
@@ -15,11 +15,16 @@ fastest of `--repeats` each, and says whether their results agree:
 - every mesh vertex's distance to the area's surface: `sim.mesh_distance` against Open3D's
   `RaycastingScene.compute_distance` (float32; "agree" counts vertices more than 10 µm apart);
 - the final recall's within-tau count: `sim.cell_lists.share_within` against scipy's k-d tree.
+
+With `--baseline DIR` (an unpacked `git archive` of another commit), the surface points are
+also timed against that tree's `sim/tsdf_points.py` on the same grid, and must be identical,
+in the same order.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import sys
 import time
 from collections.abc import Callable
@@ -97,7 +102,23 @@ def rows_sorted(points: np.ndarray) -> np.ndarray:
     return points[np.lexsort(points.T[::-1])]
 
 
-def measure(area_name: str, seconds: float | None, repeats: int) -> list[dict[str, Any]]:
+def baseline_crossing_points(tree: Path) -> Callable[..., np.ndarray]:
+    """`crossing_points` of another tree's `sim/tsdf_points.py`."""
+    path = tree / "sim" / "tsdf_points.py"
+    if not path.is_file():
+        raise SystemExit(f"--baseline {tree}: no sim/tsdf_points.py in it")
+    spec = importlib.util.spec_from_file_location("baseline_tsdf_points", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    # Registered before it runs: numba's on-disk cache of its kernels names the module.
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    found: Callable[..., np.ndarray] = module.crossing_points
+    return found
+
+
+def measure(area_name: str, seconds: float | None, repeats: int,
+            baseline: Callable[..., np.ndarray] | None = None) -> list[dict[str, Any]]:
     area = load_area(area_name)
     truth = load_ground_truth(area)
     config = preset("default")
@@ -127,6 +148,15 @@ def measure(area_name: str, seconds: float | None, repeats: int) -> list[dict[st
             lambda: grid.extract_point_cloud(cfg.weight_threshold).point.positions.numpy())
         same = np.array_equal(rows_sorted(ours), rows_sorted(ref))
         add(f"surface points ({len(ours):,})", times, "identical" if same else "DIFFER")
+        if baseline is not None:
+            before = baseline
+            times, (ours, ref) = fastest(
+                repeats, lambda: crossing_points(grid, cfg.voxel_size_m, cfg.weight_threshold),
+                lambda: before(grid, cfg.voxel_size_m, cfg.weight_threshold))
+            same = ours.shape == ref.shape and np.array_equal(ours.view(np.uint32),
+                                                               ref.view(np.uint32))
+            add("surface points, against --baseline", times,
+                "identical, same order" if same else "DIFFER")
 
         points = ours
         saved = sim.recording.MAX_BITMAP_CELLS
@@ -171,9 +201,12 @@ def main() -> None:
     parser.add_argument("--seconds", default="plateau")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--out", default="bookkeeping_ops")
+    parser.add_argument("--baseline", type=Path, default=None,
+                        help="another tree's folder, whose surface points are timed too")
     args = parser.parse_args()
     seconds = None if args.seconds == "plateau" else float(args.seconds)
-    ops = [op for name in args.areas for op in measure(name, seconds, args.repeats)]
+    before = None if args.baseline is None else baseline_crossing_points(args.baseline)
+    ops = [op for name in args.areas for op in measure(name, seconds, args.repeats, before)]
     print_table("A run's bookkeeping at its end: ours against the reference (s, fastest of "
                 f"{args.repeats})", ["area", "operation", "ours s", "reference s", "ratio",
                                      "results"],

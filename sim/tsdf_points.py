@@ -29,11 +29,14 @@ def crossing_points(grid: Any, voxel_size: float,
         return np.zeros((0, 3), dtype=np.float32)
     after = _next_blocks(blocks.keys, blocks.order, blocks.sorted_keys, blocks.origin,
                          blocks.span)
-    args = (blocks.keys, blocks.order, after, blocks.tsdf, blocks.weight,
-            np.float32(weight_threshold), np.float32(voxel_size))
-    count = _crossings(*args, np.zeros((0, 3), dtype=np.float32))
-    points = np.empty((count, 3), dtype=np.float32)
-    _crossings(*args, points)
+    limit, voxel = np.float32(weight_threshold), np.float32(voxel_size)
+    # A cheap count per block first, so that the points are written once, in place, and the
+    # blocks without a crossing (many, in the truncation band around the surface) are skipped.
+    counts = _block_counts(blocks.order, after, blocks.tsdf, blocks.weight, limit)
+    ends = np.cumsum(counts)
+    points = np.empty((int(ends[-1]), 3), dtype=np.float32)
+    _crossings(blocks.keys, blocks.order, after, blocks.tsdf, blocks.weight, limit, voxel,
+               counts, ends - counts, points)
     return points
 
 
@@ -54,18 +57,72 @@ def _next_blocks(keys: npt.NDArray[np.int32], order: npt.NDArray[np.int64],
 
 
 @numba.njit(cache=True)
+def _block_counts(order: npt.NDArray[np.int64], after: npt.NDArray[np.int64],
+                  tsdf: npt.NDArray[np.float32], weight: npt.NDArray[np.float32],
+                  limit: np.float32) -> npt.NDArray[np.int64]:  # pragma: no cover - numba
+    """(B,) the number of crossings `_crossings` writes for each block in `order`: the same
+    tests, pair by pair and without branches, axis by axis (the inner pairs, then the face
+    shared with the next block)."""
+    res = tsdf.shape[1]
+    zero = np.float32(0.0)
+    counts = np.zeros(order.shape[0], np.int64)
+    for p in range(order.shape[0]):
+        s = order[p]
+        w, t = weight[s], tsdf[s]
+        n = 0
+        for z in range(res):
+            for y in range(res):
+                for x in range(res - 1):
+                    n += (not w[z, y, x] <= limit) & (not w[z, y, x + 1] <= limit) \
+                        & (t[z, y, x] * t[z, y, x + 1] < zero)
+        for z in range(res):
+            for y in range(res - 1):
+                for x in range(res):
+                    n += (not w[z, y, x] <= limit) & (not w[z, y + 1, x] <= limit) \
+                        & (t[z, y, x] * t[z, y + 1, x] < zero)
+        for z in range(res - 1):
+            for y in range(res):
+                for x in range(res):
+                    n += (not w[z, y, x] <= limit) & (not w[z + 1, y, x] <= limit) \
+                        & (t[z, y, x] * t[z + 1, y, x] < zero)
+        o = after[p, 0]
+        if o >= 0:
+            for z in range(res):
+                for y in range(res):
+                    n += (not w[z, y, res - 1] <= limit) & (not weight[o, z, y, 0] <= limit) \
+                        & (t[z, y, res - 1] * tsdf[o, z, y, 0] < zero)
+        o = after[p, 1]
+        if o >= 0:
+            for z in range(res):
+                for x in range(res):
+                    n += (not w[z, res - 1, x] <= limit) & (not weight[o, z, 0, x] <= limit) \
+                        & (t[z, res - 1, x] * tsdf[o, z, 0, x] < zero)
+        o = after[p, 2]
+        if o >= 0:
+            for y in range(res):
+                for x in range(res):
+                    n += (not w[res - 1, y, x] <= limit) & (not weight[o, 0, y, x] <= limit) \
+                        & (t[res - 1, y, x] * tsdf[o, 0, y, x] < zero)
+        counts[p] = n
+    return counts
+
+
+@numba.njit(cache=True)
 def _crossings(keys: npt.NDArray[np.int32], order: npt.NDArray[np.int64],
                after: npt.NDArray[np.int64], tsdf: npt.NDArray[np.float32],
                weight: npt.NDArray[np.float32], limit: np.float32, voxel: np.float32,
-               out: npt.NDArray[np.float32]) -> int:  # pragma: no cover - numba
-    """Counts the crossings; also writes them to `out` when it has rows (a second pass, with
-    the count of the first). Arithmetic in float32, as Open3D's."""
+               counts: npt.NDArray[np.int64], starts: npt.NDArray[np.int64],
+               out: npt.NDArray[np.float32]) -> None:  # pragma: no cover - numba
+    """Writes each block's crossings to `out` from row `starts[p]`, voxel by voxel (z, y, x)
+    and axis by axis, skipping the blocks `counts` gives none. Arithmetic in float32, as
+    Open3D's."""
     res = tsdf.shape[1]
-    fill = out.shape[0] > 0
     zero = np.float32(0.0)
-    n = 0
     for p in range(order.shape[0]):
+        if counts[p] == 0:
+            continue
         slot = order[p]
+        n = starts[p]
         for z in range(res):
             for y in range(res):
                 for x in range(res):
@@ -90,19 +147,19 @@ def _crossings(keys: npt.NDArray[np.int32], order: npt.NDArray[np.int64],
                             continue
                         t1 = tsdf[other, zz, yy, xx]
                         if t0 * t1 < zero:
-                            if fill:
-                                ratio = (zero - t0) / (t1 - t0)
-                                gx = np.float32(keys[slot, 0] * res + x)
-                                gy = np.float32(keys[slot, 1] * res + y)
-                                gz = np.float32(keys[slot, 2] * res + z)
-                                if a == 0:
-                                    gx += ratio
-                                elif a == 1:
-                                    gy += ratio
-                                else:
-                                    gz += ratio
-                                out[n, 0] = voxel * gx
-                                out[n, 1] = voxel * gy
-                                out[n, 2] = voxel * gz
+                            ratio = (zero - t0) / (t1 - t0)
+                            gx = np.float32(keys[slot, 0] * res + x)
+                            gy = np.float32(keys[slot, 1] * res + y)
+                            gz = np.float32(keys[slot, 2] * res + z)
+                            if a == 0:
+                                gx += ratio
+                            elif a == 1:
+                                gy += ratio
+                            else:
+                                gz += ratio
+                            out[n, 0] = voxel * gx
+                            out[n, 1] = voxel * gy
+                            out[n, 2] = voxel * gz
                             n += 1
-    return n
+        if n != starts[p] + counts[p]:
+            raise RuntimeError("a block's crossings differ from its count")
