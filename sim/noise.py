@@ -9,6 +9,9 @@ sqrt(3) times the bound in position).
 
 from __future__ import annotations
 
+import math
+
+import numba
 import numpy as np
 import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
@@ -52,8 +55,28 @@ def add_depth_noise(
     noise = rng.standard_normal(depth.shape)
     if not config.enabled:
         return depth.copy()
-    noisy = depth + (noise * depth_sigma(depth, config)).astype(np.float32)
-    return np.maximum(noisy, np.float32(0.0), where=np.isfinite(noisy), out=noisy)
+    flat = np.ascontiguousarray(depth, dtype=np.float32).reshape(-1)
+    noisy: npt.NDArray[np.float32] = _noisy(flat, noise.reshape(-1), config.sigma_a,
+                                            config.sigma_b, config.z0).reshape(depth.shape)
+    return noisy
+
+
+@numba.njit(cache=True)
+def _noisy(depth: npt.NDArray[np.float32], noise: npt.NDArray[np.float64], a: float, b: float,
+           z0: float) -> npt.NDArray[np.float32]:  # pragma: no cover - numba
+    """(N,) float32 depth + float32(noise * sigma(depth)), floored at 0 where finite: in one
+    pass the operations NumPy's form made array by array (`depth_sigma` in float64, the
+    product rounded to float32, a float32 sum), so the result is the same to the bit."""
+    out = np.empty(depth.shape[0], np.float32)
+    zero = np.float32(0.0)
+    for i in range(depth.shape[0]):
+        d = depth[i]
+        dz = np.float64(d) - z0
+        v = d + np.float32(noise[i] * (a + b * (dz * dz)))
+        if math.isfinite(v) and not v >= zero:
+            v = zero
+        out[i] = v
+    return out
 
 
 class OdometryDrift:
@@ -72,11 +95,11 @@ class OdometryDrift:
         if not cfg.enabled:
             return
         bound = cfg.position_bound_m
-        self.offset = np.clip(self.offset + draw[:3] * cfg.position_step_m, -bound, bound)
-        self.yaw_offset = float(
-            np.clip(self.yaw_offset + draw[3] * cfg.yaw_step_rad, -cfg.yaw_bound_rad,
-                    cfg.yaw_bound_rad)
-        )
+        # Clamped as `np.clip` clamps, without its per-call cost (four times a fused frame).
+        self.offset = np.minimum(np.maximum(self.offset + draw[:3] * cfg.position_step_m,
+                                            -bound), bound)
+        self.yaw_offset = min(max(self.yaw_offset + float(draw[3]) * cfg.yaw_step_rad,
+                                  -cfg.yaw_bound_rad), cfg.yaw_bound_rad)
 
     def estimate(self, true_pose: Pose) -> Pose:
         """The pose odometry reports for `true_pose`."""

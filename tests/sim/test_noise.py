@@ -184,3 +184,20 @@ def test_estimate_adds_the_offset() -> None:
     stepped = drift.estimate(pose)
     assert stepped.position == pytest.approx(pose.position + drift.offset)
     assert stepped.yaw == pytest.approx(0.5 + drift.yaw_offset)
+
+
+def test_the_noisy_depth_is_numpys_array_form_to_the_bit() -> None:
+    """The compiled pass gives what the array-by-array NumPy form gives, bit for bit:
+    including NaN, depths near zero that the noise would push below it, and both strides."""
+    cfg = DepthNoiseConfig(sigma_a=0.01, sigma_b=0.02)
+    for shape in [(120, 160), (60, 80)]:
+        depth = np.random.default_rng(1).uniform(0.0, 8.0, shape).astype(np.float32)
+        depth[np.random.default_rng(2).random(shape) < 0.2] = np.nan
+        depth[0, :20] = np.float32(1e-4)
+        noise = np.random.default_rng(3).standard_normal(shape)
+        reference = depth + (noise * depth_sigma(depth, cfg)).astype(np.float32)
+        np.maximum(reference, np.float32(0.0), where=np.isfinite(reference), out=reference)
+        got = add_depth_noise(depth, cfg, np.random.default_rng(3))
+        assert got.dtype == np.float32 and got.shape == shape
+        np.testing.assert_array_equal(got.view(np.uint32), reference.view(np.uint32))
+        assert np.count_nonzero(got == 0.0) > 0
