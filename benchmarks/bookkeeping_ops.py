@@ -24,7 +24,6 @@ in the same order.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import sys
 import time
 from collections.abc import Callable
@@ -38,7 +37,7 @@ from scipy.spatial import cKDTree
 
 import sim.recording
 from areas import load_area, load_ground_truth
-from benchmarks.common import print_table, write_json
+from benchmarks.common import baseline_module, print_table, write_json
 from planners.registry import make, spec
 from sim.camera import DepthCamera
 from sim.cell_lists import share_within
@@ -104,16 +103,8 @@ def rows_sorted(points: np.ndarray) -> np.ndarray:
 
 def baseline_crossing_points(tree: Path) -> Callable[..., np.ndarray]:
     """`crossing_points` of another tree's `sim/tsdf_points.py`."""
-    path = tree / "sim" / "tsdf_points.py"
-    if not path.is_file():
-        raise SystemExit(f"--baseline {tree}: no sim/tsdf_points.py in it")
-    spec = importlib.util.spec_from_file_location("baseline_tsdf_points", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    # Registered before it runs: numba's on-disk cache of its kernels names the module.
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    found: Callable[..., np.ndarray] = module.crossing_points
+    found: Callable[..., np.ndarray] = baseline_module(
+        tree, "sim/tsdf_points.py", "baseline_tsdf_points").crossing_points
     return found
 
 

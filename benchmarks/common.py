@@ -3,14 +3,18 @@ in a fresh data folder."""
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import platform
 import resource
+import shutil
 import socket
 import subprocess
 import sys
+import tempfile
 import time
+import types
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +33,27 @@ def checked_baseline(baseline: Path | None, folder: str = "sim") -> Path | None:
     if not (baseline / folder).is_dir():
         raise SystemExit(f"--baseline {baseline}: not a checkout (no {folder}/ folder in it)")
     return baseline.resolve()
+
+
+def baseline_module(baseline: Path, relative: str, name: str) -> types.ModuleType:
+    """Another tree's module file `relative` (such as "sim/tsdf_points.py"), loaded as `name`.
+
+    It runs from a copy in a temporary folder: numba's on-disk cache of its kernels then lives
+    there, and names `name` as their module, so that the other tree's own cache (which its own
+    runs load as `sim....`) is left alone. Its imports resolve to this tree's modules."""
+    source = baseline / relative
+    if not source.is_file():
+        raise SystemExit(f"--baseline {baseline}: no {relative} in it")
+    folder = Path(tempfile.mkdtemp(prefix="flybo-baseline-"))
+    copy = folder / source.name
+    shutil.copyfile(source, copy)
+    spec = importlib.util.spec_from_file_location(name, copy)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    # Registered before it runs: numba's cache entries name the module they were compiled in.
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
 
 
 def peak_rss_mib() -> float:

@@ -17,7 +17,6 @@ states, and each voxel's batch tag and returns). Writes `benchmarks/results/occu
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import inspect
 import sys
 import time
@@ -100,9 +99,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--recordings", type=Path, nargs="*", default=[],
                         help="crash-sweep recordings whose poses to fuse")
     args = parser.parse_args(argv)
-    other = args.baseline / "sim" / "occupancy_kernels.py"
-    if not other.is_file():
-        raise SystemExit(f"--baseline {args.baseline}: no sim/occupancy_kernels.py in it")
     from areas.registry import all_area_names
 
     known = set(all_area_names())
@@ -114,16 +110,11 @@ def main(argv: list[str] | None = None) -> int:
                              f"{path.name.split('--', 1)[0]!r} (`flybo areas list`)")
 
     import sim.occupancy as occupancy
-    from benchmarks.common import print_table, write_json
+    from benchmarks.common import baseline_module, print_table, write_json
     from tests.sim.thin_scenes import new_map
 
-    spec = importlib.util.spec_from_file_location("baseline_occupancy_kernels", other)
-    assert spec is not None and spec.loader is not None
-    baseline = importlib.util.module_from_spec(spec)
-    # Registered before it runs: numba's on-disk cache of its kernels names the module, and a
-    # later run that loads them from the cache imports it by that name.
-    sys.modules[spec.name] = baseline
-    spec.loader.exec_module(baseline)
+    baseline = baseline_module(args.baseline, "sim/occupancy_kernels.py",
+                               "baseline_occupancy_kernels")
     own = occupancy.integrate_rays
     ours = list(inspect.signature(own.py_func).parameters)
     theirs = list(inspect.signature(baseline.integrate_rays.py_func).parameters)
