@@ -40,18 +40,20 @@ def _axis_start(a: float, d: float, i: int) -> tuple[int, float, float]:
 @numba.njit(cache=True)
 def _traverse(
     ax: float, ay: float, az: float, bx: float, by: float, bz: float,
-    nx: int, ny: int, nz: int, buf: IndexArray,
-) -> tuple[int, bool, int, int, int, int, int, int]:
+    nx: int, ny: int, nz: int, buf: IndexArray, skip: npt.NDArray[np.uint8] | None,
+) -> tuple[int, int, bool, int, int, int, int, int, int]:
     """3D-DDA (Amanatides & Woo) of the segment a→b clipped to the grid box.
 
     a, b: segment ends in grid units, (world - grid origin) / voxel_size; voxel (i, j, k) spans
         [i, i+1) x [j, j+1) x [k, k+1) and the box is [0, nx) x [0, ny) x [0, nz).
     buf: (M,) int64 with M >= nx + ny + nz; receives the flat C-order indices of the in-grid
-        voxels the segment visits, in order. When b lies in the grid the last one is floor(b).
+        voxels the segment visits, in order, but those whose bit is set in `skip`
+        (ceil(nx*ny*nz / 8),) (byte v >> 3, bit v & 7), when given. When b lies in the grid the
+        last voxel visited is floor(b).
 
     Returns:
-        count written, whether the last voxel written is b's voxel, then the i, j, k of the
-        first and of the last voxel written (meaningless when count is 0).
+        count written, count visited, whether the last voxel visited is b's voxel, then the
+        i, j, k of the first and of the last voxel visited (meaningless when none is).
     """
     dx = bx - ax
     dy = by - ay
@@ -70,27 +72,27 @@ def _traverse(
         t0 = max(t0, min(ta, tb))
         t1 = min(t1, max(ta, tb))
     elif ax < 0.0 or ax >= nx:
-        return 0, False, 0, 0, 0, 0, 0, 0
+        return 0, 0, False, 0, 0, 0, 0, 0, 0
     if dy != 0.0:
         ta = -ay / dy
         tb = (ny - ay) / dy
         t0 = max(t0, min(ta, tb))
         t1 = min(t1, max(ta, tb))
     elif ay < 0.0 or ay >= ny:
-        return 0, False, 0, 0, 0, 0, 0, 0
+        return 0, 0, False, 0, 0, 0, 0, 0, 0
     if dz != 0.0:
         ta = -az / dz
         tb = (nz - az) / dz
         t0 = max(t0, min(ta, tb))
         t1 = min(t1, max(ta, tb))
     elif az < 0.0 or az >= nz:
-        return 0, False, 0, 0, 0, 0, 0, 0
+        return 0, 0, False, 0, 0, 0, 0, 0, 0
     if not t0 < t1:
         # At most a single point of the segment touches the box.
         if end_in:
             buf[0] = end_flat
-            return 1, True, ex, ey, ez, ex, ey, ez
-        return 0, False, 0, 0, 0, 0, 0, 0
+            return _kept(skip, end_flat), 1, True, ex, ey, ez, ex, ey, ez
+        return 0, 0, False, 0, 0, 0, 0, 0, 0
 
     # First and last voxels; clamping absorbs rounding of points computed on the box faces.
     ix = _floor_in(ax + t0 * dx, nx)
@@ -114,8 +116,8 @@ def _traverse(
         # Only when rounding puts the entry past the end (segment shorter than rounding).
         if end_in:
             buf[0] = end_flat
-            return 1, True, ex, ey, ez, ex, ey, ez
-        return 0, False, 0, 0, 0, 0, 0, 0
+            return _kept(skip, end_flat), 1, True, ex, ey, ez, ex, ey, ez
+        return 0, 0, False, 0, 0, 0, 0, 0, 0
     if cx == 0:
         tmx = math.inf
     if cy == 0:
@@ -126,8 +128,10 @@ def _traverse(
     sty = sy * nz
     idx = (ix * ny + iy) * nz + iz
     n = cx + cy + cz
+    # Each voxel is written to the next slot, which moves on unless the voxel is skipped.
     buf[0] = idx
-    for s in range(1, n + 1):
+    kept = _kept(skip, idx)
+    for _ in range(n):
         if tmx <= tmy and tmx <= tmz:
             idx += stx
             cx -= 1
@@ -140,8 +144,17 @@ def _traverse(
             idx += sz
             cz -= 1
             tmz = math.inf if cz == 0 else tmz + tdz
-        buf[s] = idx
-    return n + 1, end_in, ix, iy, iz, lx, ly, lz
+        buf[kept] = idx
+        kept += _kept(skip, idx)
+    return kept, n + 1, end_in, ix, iy, iz, lx, ly, lz
+
+
+@numba.njit(cache=True, inline="always")
+def _kept(skip: npt.NDArray[np.uint8] | None, v: int) -> int:
+    """1 unless voxel v's bit is set in `skip` (never without one)."""
+    if skip is None:
+        return 1
+    return 1 - ((skip[v >> 3] >> (v & 7)) & 1)
 
 
 @numba.njit(cache=True, inline="always")
@@ -287,9 +300,11 @@ def integrate_rays(
         bz = (endpoints[r, 2] - grid_origin[2]) / voxel_size
         if not (math.isfinite(bx) and math.isfinite(by) and math.isfinite(bz)):
             continue
-        count, end_in, fi, fj, fk, li, lj, lk = _traverse(ax, ay, az, bx, by, bz, nx, ny, nz,
-                                                          buf)
-        if count == 0:
+        # Most voxels a ray crosses are free space settled at the floor, where no miss acts
+        # and (their bits cleared above) no hit falls: the walk leaves them out of `buf`.
+        count, visited, end_in, fi, fj, fk, li, lj, lk = _traverse(
+            ax, ay, az, bx, by, bz, nx, ny, nz, buf, settled)
+        if visited == 0:
             continue
         dx = bx - ax
         dy = by - ay
@@ -300,17 +315,8 @@ def integrate_rays(
         length = 0.0
         first_change = -1
         last_change = -1
-        # Inline rather than a per-voxel function call: this loop is the hot path. Most voxels
-        # a ray crosses are free space settled at the floor, where no miss acts and (their bits
-        # cleared above) no hit falls: a tight loop over `settled` steps over them before the
-        # full body, which the other voxels go through.
-        c = -1
-        while True:
-            c += 1
-            while c < count and (settled[buf[c] >> 3] >> (buf[c] & 7)) & 1:
-                c += 1
-            if c >= count:
-                break
+        # Inline rather than a per-voxel function call: this loop is the hot path.
+        for c in range(count):
             v = buf[c]
             tag = np.int64(words[2 * v])
             returns = np.int64(0)
@@ -381,7 +387,7 @@ def integrate_rays(
                     first_change = c
                 last_change = c
         if hit[r] and end_in:
-            v = buf[count - 1]
+            v = buf[count - 1]  # the end voxel: a hit voxel, never skipped, and the last
             if words[2 * v] == done_tag:
                 # The first ray of the batch to return in this voxel: add its return to the
                 # running mean of where in the voxel rays return.
@@ -428,7 +434,7 @@ def decode_returns(returns: npt.NDArray[np.uint32]) -> tuple[FloatArray, npt.NDA
 def _ray_voxels(a: FloatArray, b: FloatArray, nx: int, ny: int, nz: int) -> IndexArray:
     """(K, 3) int64 voxels segment a→b (grid units) visits in the grid, in order."""
     buf = np.empty(nx + ny + nz + 3, dtype=np.int64)
-    count = _traverse(a[0], a[1], a[2], b[0], b[1], b[2], nx, ny, nz, buf)[0]
+    count = _traverse(a[0], a[1], a[2], b[0], b[1], b[2], nx, ny, nz, buf, None)[0]
     out = np.empty((count, 3), dtype=np.int64)
     for c in range(count):
         out[c, 0], out[c, 1], out[c, 2] = _unflatten(buf[c], ny, nz)
