@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numba
 import numpy as np
 import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
@@ -93,13 +94,14 @@ class TsdfVolume:
         return ext
 
     def integrate(self, depth: npt.NDArray[np.float32], pose: Pose) -> None:
-        """Fuse one z-depth image (NaN = no return) seen from `pose`."""
-        clean = np.nan_to_num(depth, nan=0.0).astype(np.float32)
-        image = o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(clean)))
+        """Fuse one float32 z-depth image (NaN = no return) seen from `pose`."""
+        clean, within = _without_nan(np.ascontiguousarray(depth, dtype=np.float32).reshape(-1),
+                                     np.float32(self._max_range))
+        if not within:
+            return  # nothing within range: Open3D would raise "no block is touched"
+        image = o3d.t.geometry.Image(o3c.Tensor(clean.reshape(depth.shape)))
         ext = o3c.Tensor(self.extrinsic(pose))
         mult = self.config.trunc_voxel_multiplier
-        if not np.any((clean > 0.0) & (clean <= self._max_range)):
-            return  # nothing within range: Open3D would raise "no block is touched"
         try:
             blocks = self._grid.compute_unique_block_coordinates(
                 image, self._intrinsic, ext, 1.0, self._max_range, mult
@@ -154,3 +156,26 @@ class TsdfVolume:
             return np.full(len(points), np.nan), np.zeros(len(points), dtype=np.float32)
         sdf, weight = trilinear(self._grid, points, cfg.voxel_size_m)
         return sdf * cfg.voxel_size_m * cfg.trunc_voxel_multiplier, weight
+
+
+_FLOAT32_MAX = np.finfo(np.float32).max
+
+
+@numba.njit(cache=True)
+def _without_nan(depth: npt.NDArray[np.float32], max_range: np.float32) -> tuple[
+        npt.NDArray[np.float32], bool]:  # pragma: no cover - numba
+    """(N,) `np.nan_to_num(depth, nan=0.0)` (infinities to float32's extremes) and whether any
+    of its values lies in (0, max_range], compared in float32 as NumPy compares a float32
+    image with a Python float: one pass where NumPy made four."""
+    out = np.empty_like(depth)
+    zero = np.float32(0.0)
+    within = False
+    for i in range(depth.shape[0]):
+        d = depth[i]
+        if math.isnan(d):
+            d = zero
+        elif math.isinf(d):
+            d = _FLOAT32_MAX if d > zero else -_FLOAT32_MAX
+        out[i] = d
+        within |= zero < d <= max_range
+    return out, within

@@ -187,3 +187,24 @@ def test_sdf_at_reads_the_field_as_open3ds_block_table_gives_it() -> None:
     assert weight.dtype == np.float32
     seen = np.isfinite(sdf)
     assert 1_000 < np.count_nonzero(seen) < len(probes)
+
+
+def test_a_frame_is_cleaned_as_numpy_cleans_it() -> None:
+    """The compiled pass gives `np.nan_to_num(depth, nan=0.0)` to the bit and says whether a
+    depth lies within range as NumPy's float32 comparison does, at the range's edge too."""
+    from sim.tsdf import _without_nan
+
+    rng = np.random.default_rng(4)
+    depth = rng.uniform(-1.0, 7.0, (60, 80)).astype(np.float32)
+    depth[rng.random(depth.shape) < 0.2] = np.nan
+    depth[0, :3] = [np.inf, -np.inf, 0.0]
+    depth[1, 0] = np.float32(4.5)
+    for max_range in (4.5, 0.1, 5.0000001):
+        clean, within = _without_nan(depth.reshape(-1), np.float32(max_range))
+        expected = np.nan_to_num(depth, nan=0.0).astype(np.float32)
+        np.testing.assert_array_equal(clean.reshape(depth.shape).view(np.uint32),
+                                      expected.view(np.uint32))
+        assert within == bool(np.any((expected > 0.0) & (expected <= max_range)))
+    edge = np.array([np.nan, np.float32(0.1), -2.0], dtype=np.float32)
+    assert _without_nan(edge, np.float32(0.1))[1] == bool(np.any((edge > 0) & (edge <= 0.1)))
+    assert not _without_nan(np.full(4, np.nan, dtype=np.float32), np.float32(5.0))[1]
