@@ -14,7 +14,10 @@ fastest of `--repeats` each, and says whether their results agree:
   reading through Open3D's block table (`hashmap().find`);
 - every mesh vertex's distance to the area's surface: `sim.mesh_distance` against Open3D's
   `RaycastingScene.compute_distance` (float32; "agree" counts vertices more than 10 µm apart);
-- the final recall's within-tau count: `sim.cell_lists.share_within` against scipy's k-d tree.
+- the final recall's within-tau count: `sim.cell_lists.share_within` against scipy's k-d tree;
+- the final mesh: `sim.tsdf_slabs.mesh_in_slabs` (Open3D's marching cubes, slab by slab, for
+  its memory) against one extraction of the whole grid ("agree": the same vertices and as many
+  triangles).
 
 With `--baseline DIR` (an unpacked `git archive` of another commit), the surface points are
 also timed against that tree's `sim/tsdf_points.py` on the same grid, and must be identical,
@@ -50,6 +53,7 @@ from sim.planning_charge import PlanningCharge
 from sim.reference_speed import speed_factor
 from sim.tsdf import TsdfVolume
 from sim.tsdf_points import crossing_points
+from sim.tsdf_slabs import extract_mesh
 
 
 def fastest(repeats: int, *calls: Callable[[], Any]) -> tuple[list[float], list[Any]]:
@@ -95,6 +99,12 @@ def read_through_table(tsdf: TsdfVolume, points: np.ndarray) -> tuple[np.ndarray
     sdf[unseen] = np.nan
     weight[unseen] = 0.0
     return sdf * cfg.voxel_size_m * cfg.trunc_voxel_multiplier, weight
+
+
+def whole_grid_mesh(tsdf: TsdfVolume) -> tuple[np.ndarray, np.ndarray]:
+    """One Open3D extraction of the whole grid (what `mesh_in_slabs` does slab by slab)."""
+    vertices, triangles = extract_mesh(tsdf.grid, tsdf.config.weight_threshold)
+    return vertices.astype(np.float64), triangles
 
 
 def rows_sorted(points: np.ndarray) -> np.ndarray:
@@ -181,6 +191,12 @@ def measure(area_name: str, seconds: float | None, repeats: int,
             lambda: float(np.count_nonzero(np.isfinite(cKDTree(vertices).query(
                 final_points, k=1, distance_upper_bound=bound)[0]))) / len(final_points))
         add("recall count", times, "identical" if ours == ref else "DIFFER")
+
+        times, (ours, ref) = fastest(repeats, tsdf.mesh, lambda: whole_grid_mesh(tsdf))
+        same = (len(ours[1]) == len(ref[1])
+                and np.array_equal(rows_sorted(ours[0]), rows_sorted(ref[0])))
+        add(f"final mesh ({len(ours[0]):,} vertices)", times,
+            "identical vertices and triangle count" if same else "DIFFER")
         return ops
     finally:
         loop.close()

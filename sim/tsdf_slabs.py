@@ -34,7 +34,7 @@ import numpy.typing as npt
 
 from sim.open3d_any import o3c, o3d
 
-__all__ = ["SLAB_BLOCKS", "block_grid", "mesh_in_slabs"]
+__all__ = ["SLAB_BLOCKS", "block_grid", "extract_mesh", "mesh_in_slabs"]
 
 _CPU = o3c.Device("CPU:0")
 
@@ -70,7 +70,7 @@ def mesh_in_slabs(grid: Any, voxel_size: float, weight_threshold: float,
     weight = grid.attribute("weight").numpy()
     starts = _slab_starts(keys, tsdf, weight, rows, slab_blocks, voxel_size, weight_threshold)
     if len(starts) <= 1:
-        vertices, triangles = _extract(grid, weight_threshold)
+        vertices, triangles = extract_mesh(grid, weight_threshold)
         return vertices.astype(np.float64), triangles
     edges = [*starts, int(keys[:, 0].max()) + 1]
     resolution = tsdf.shape[1]
@@ -78,7 +78,7 @@ def mesh_in_slabs(grid: Any, voxel_size: float, weight_threshold: float,
     def slab(lo: int, hi: int) -> Slab:
         inside = (keys[:, 0] >= lo) & (keys[:, 0] < hi)
         sub = _sub_grid(voxel_size, keys, rows, inside, keys[:, 0] == hi, tsdf, weight)
-        return _extract(sub, weight_threshold)
+        return extract_mesh(sub, weight_threshold)
 
     # The slabs' meshes are held in pages of their own until all are made; the result is then
     # filled slab by slab, each slab's pages returned to the system once copied. The result's
@@ -231,7 +231,7 @@ def _sub_grid(voxel_size: float, keys: npt.NDArray[np.int32], rows: npt.NDArray[
     return sub
 
 
-def _extract(grid: Any, weight_threshold: float) -> tuple[Vertices, Triangles]:
+def extract_mesh(grid: Any, weight_threshold: float) -> tuple[Vertices, Triangles]:
     """Open3D's mesh of `grid`, copied into arrays of their own pages (`_own_pages`)."""
     try:
         mesh = grid.extract_triangle_mesh(weight_threshold)

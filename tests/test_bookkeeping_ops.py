@@ -23,8 +23,10 @@ def test_each_operation_agrees_with_the_one_it_replaced() -> None:
            for op in measure("maze", 30.0, 1, baseline_crossing_points(ROOT))}
     assert set(ops) == {"surface points", "surface points, against --baseline",
                         "thinning a snapshot", "TSDF at 20,000 points", "vertex distances",
-                        "recall count"}
+                        "recall count", "final mesh"}
     assert ops.pop("surface points, against --baseline")["agree"] == "identical, same order"
+    mesh = ops.pop("final mesh")
+    assert mesh["agree"] == "identical vertices and triangle count", mesh["agree"]
     for name, op in ops.items():
         assert op["ours_s"] > 0.0 and op["reference_s"] > 0.0
         if name != "vertex distances":

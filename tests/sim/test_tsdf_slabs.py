@@ -13,11 +13,11 @@ from sim.geometry import Pose
 from sim.open3d_any import o3c
 from sim.tsdf import TsdfConfig, TsdfVolume
 from sim.tsdf_slabs import (
-    _extract,
     _pair_equal_rows,
     _plane_is_ambiguous,
     _slab_starts,
     block_grid,
+    extract_mesh,
     mesh_in_slabs,
 )
 
@@ -98,7 +98,7 @@ def _triangle_set(vertices: npt.NDArray[np.float32],
 
 
 def _assert_same_mesh(grid: object, slab_blocks: int) -> int:
-    whole_v, whole_t = _extract(grid, THRESHOLD)
+    whole_v, whole_t = extract_mesh(grid, THRESHOLD)
     slab_v64, slab_t = mesh_in_slabs(grid, VOXEL, THRESHOLD, slab_blocks)
     assert slab_v64.dtype == np.float64
     slab_v = slab_v64.astype(np.float32)  # exact: Open3D's positions are float32
