@@ -20,6 +20,7 @@ from sim.geometry import FloatArray
 from sim.occupancy import IndexArray, IndexBox, OccupancyMap, StateGrid, VoxelState
 
 BoolGrid = npt.NDArray[np.bool_]
+BitGrid = npt.NDArray[np.uint64]
 
 _UNKNOWN = np.uint8(VoxelState.UNKNOWN)
 _FREE = np.uint8(VoxelState.FREE)
@@ -48,12 +49,14 @@ class FrontierCluster:
 
 @numba.njit(cache=True)
 def _frontier_box(
-    state: StateGrid, frontier: BoolGrid,
+    state: StateGrid, frontier: BoolGrid, bits: BitGrid,
     lo0: int, lo1: int, lo2: int, hi0: int, hi1: int, hi2: int,
 ) -> int:
     """Recompute `frontier` on the half-open box [lo, hi) from `state`.
 
-    state: (nx, ny, nz) uint8 `VoxelState`; frontier: (nx, ny, nz) bool, written in the box.
+    state: (nx, ny, nz) uint8 `VoxelState`; frontier: (nx, ny, nz) bool, written in the box;
+    bits: (ceil(nx*ny*nz / 64),) uint64, the same set one bit per voxel (word v >> 6, bit
+    v & 63 of flat C-order index v), kept equal to `frontier`.
     Returns the change in the number of frontier voxels.
     """
     nx, ny, nz = state.shape
@@ -71,8 +74,11 @@ def _frontier_box(
                         or (k > 0 and state[i, j, k - 1] == _UNKNOWN)
                         or (k + 1 < nz and state[i, j, k + 1] == _UNKNOWN)
                     )
-                delta += int(f) - int(frontier[i, j, k])
-                frontier[i, j, k] = f
+                if f != frontier[i, j, k]:
+                    delta += 1 if f else -1
+                    frontier[i, j, k] = f
+                    v = (i * ny + j) * nz + k
+                    bits[v >> 6] ^= np.uint64(1) << np.uint64(v & 63)
     return delta
 
 
@@ -140,20 +146,17 @@ def _find(parent: IndexArray, p: int) -> int:
 
 
 @numba.njit(cache=True)
-def _connected(indices: IndexArray, key: IndexArray, ny: int, nz: int) -> tuple[IndexArray, int]:
-    """26-connected components of a voxel set, joining only voxels with equal `key`.
+def _adjacent_pairs(indices: IndexArray, ny: int, nz: int) -> npt.NDArray[np.int32]:
+    """(M, 2) int32 every pair (q, p), q < p, of 26-neighbours among the voxels, by p then by
+    q's row.
 
     indices: (K, 3) int64 distinct voxels of a grid with `ny` x `nz` columns, in C order.
-    key: (K,) int64.
-
-    Returns:
-        (K,) int64 labels 0 .. n-1 numbered in C order of each component's first voxel, and n.
     """
     count = indices.shape[0]
     flat = np.empty(count, dtype=np.int64)
     for p in range(count):
         flat[p] = (indices[p, 0] * ny + indices[p, 1]) * nz + indices[p, 2]
-    # Each pair is joined once, from its later voxel: only the 13 neighbours before p in C
+    # Each pair is found once, from its later voxel: only the 13 neighbours before p in C
     # order are looked for: (i, j, k - 1), which can only be p - 1, and four rows of three
     # (i - 1 with j - 1, j, j + 1; i with j - 1; each k - 1 .. k + 1). The voxels are sorted, so
     # where each row starts moves forward with p: one cursor per row walks the list once, in
@@ -161,13 +164,14 @@ def _connected(indices: IndexArray, key: IndexArray, ny: int, nz: int) -> tuple[
     rows_i = (-1, -1, -1, 0)
     rows_j = (-1, 0, 1, -1)
     cursor = np.zeros(4, dtype=np.int64)
-    parent = np.arange(count)
+    pairs = np.empty((13 * count, 2), dtype=np.int32)
+    m = 0
     for p in range(count):
         i, j, k = indices[p, 0], indices[p, 1], indices[p, 2]
-        rp = p
-        if k > 0 and p > 0 and flat[p - 1] == flat[p] - 1 and key[p - 1] == key[p]:
-            rp = _find(parent, p - 1)
-            parent[p] = rp
+        if k > 0 and p > 0 and flat[p - 1] == flat[p] - 1:
+            pairs[m, 0] = p - 1
+            pairs[m, 1] = p
+            m += 1
         for row in range(4):
             a = i + rows_i[row]
             b = j + rows_j[row]
@@ -181,12 +185,27 @@ def _connected(indices: IndexArray, key: IndexArray, ny: int, nz: int) -> tuple[
                 q += 1
             cursor[row] = q
             while q < p and flat[q] <= last:
-                if key[q] == key[p] and parent[q] != rp:
-                    rq = _find(parent, q)
-                    if rp != rq:
-                        parent[max(rp, rq)] = min(rp, rq)
-                        rp = min(rp, rq)
+                pairs[m, 0] = q
+                pairs[m, 1] = p
+                m += 1
                 q += 1
+    return pairs[:m]
+
+
+@numba.njit(cache=True)
+def _joined(pairs: npt.NDArray[np.int32], key: IndexArray, count: int) -> tuple[IndexArray, int]:
+    """Components of `count` voxels joined by the `pairs` (M, 2) whose two voxels have equal
+    `key` (count,): (count,) int64 labels 0 .. n-1 numbered in C order of each component's
+    first voxel, and n."""
+    parent = np.arange(count)
+    for e in range(pairs.shape[0]):
+        q, p = pairs[e, 0], pairs[e, 1]
+        if key[q] != key[p]:
+            continue
+        rq = _find(parent, q)
+        rp = _find(parent, p)
+        if rp != rq:
+            parent[max(rp, rq)] = min(rp, rq)
     # Each root is its component's smallest member, so numbering roots in order follows C order.
     labels = np.empty(count, dtype=np.int64)
     n = 0
@@ -198,6 +217,19 @@ def _connected(indices: IndexArray, key: IndexArray, ny: int, nz: int) -> tuple[
         else:
             labels[p] = labels[root]
     return labels, n
+
+
+def _connected(indices: IndexArray, key: IndexArray, ny: int, nz: int) -> tuple[IndexArray, int]:
+    """26-connected components of a voxel set, joining only voxels with equal `key`.
+
+    indices: (K, 3) int64 distinct voxels of a grid with `ny` x `nz` columns, in C order.
+    key: (K,) int64.
+
+    Returns:
+        (K,) int64 labels 0 .. n-1 numbered in C order of each component's first voxel, and n.
+    """
+    labels, n = _joined(_adjacent_pairs(indices, ny, nz), key, len(indices))
+    return labels, int(n)
 
 
 @numba.njit(cache=True)
@@ -213,28 +245,36 @@ def _label_boxes(indices: IndexArray, labels: IndexArray, n: int) -> tuple[Index
     return lo, hi
 
 
-@numba.njit(cache=True)
-def _true_indices(mask: BoolGrid, count: int) -> IndexArray:
-    """(count, 3) int64 indices of the True voxels of `mask`, in C order; count is their number.
+# The position of a word's lowest set bit from that bit alone: a de Bruijn sequence's top six
+# bits after multiplying by the bit are distinct for each of the 64 positions.
+_DE_BRUIJN = 0x03F79D71B4CB0A89
+_BIT_AT = np.zeros(64, dtype=np.int64)
+for _b in range(64):
+    _BIT_AT[((_DE_BRUIJN << _b) & (2**64 - 1)) >> 58] = _b
+del _b
 
-    Reads the grid eight voxels at a time and looks closer only where one is set: frontier
-    voxels are a small share of the grid, and this runs at every call for clusters."""
-    _, ny, nz = mask.shape
-    flat = mask.ravel()
-    whole = flat.size // 8
-    words = flat[:whole * 8].view(np.uint64)
+
+@numba.njit(cache=True)
+def _true_indices(bits: BitGrid, ny: int, nz: int, count: int) -> IndexArray:
+    """(count, 3) int64 indices of the voxels whose bit is set in `bits` (one bit per voxel of
+    a (.., ny, nz) grid, as `_frontier_box` keeps them), in C order; count is their number.
+
+    Frontier voxels are a small share of the grid, and this runs at every call for clusters:
+    64 voxels are read at a time, and only the set bits of a word are visited."""
     out = np.empty((count, 3), dtype=np.int64)
+    de_bruijn = np.uint64(_DE_BRUIJN)
     p = 0
-    for w in range(whole + 1):
-        if w < whole and words[w] == 0:
-            continue
-        for v in range(w * 8, min(w * 8 + 8, flat.size)):
-            if flat[v]:
-                q = v // nz
-                out[p, 0] = q // ny
-                out[p, 1] = q - (q // ny) * ny
-                out[p, 2] = v - q * nz
-                p += 1
+    for w in range(bits.shape[0]):
+        word = bits[w]
+        while word != 0:
+            low = word & (~word + np.uint64(1))
+            v = w * 64 + _BIT_AT[(low * de_bruijn) >> np.uint64(58)]
+            word ^= low
+            q = v // nz
+            out[p, 0] = q // ny
+            out[p, 1] = q - (q // ny) * ny
+            out[p, 2] = v - q * nz
+            p += 1
     return out
 
 
@@ -278,6 +318,9 @@ class FrontierTracker:
         self._map = occupancy
         self._subscription = occupancy.subscribe()
         self._frontier = np.zeros(occupancy.shape, dtype=bool)
+        # The same set one bit per voxel (`_frontier_box`): listing the frontier reads 64
+        # voxels a word.
+        self._bits = np.zeros((self._frontier.size + 63) // 64, dtype=np.uint64)
         self._count = 0
         self.full_recompute()
 
@@ -311,13 +354,14 @@ class FrontierTracker:
         """Recompute the whole frontier grid."""
         self._subscription.take()
         self._frontier[...] = False
+        self._bits[...] = 0
         self._count = 0
         self._recompute(IndexBox.full(self._map.shape))
 
     def _recompute(self, region: IndexBox) -> None:
         lo, hi = region.lo, region.hi
         self._count += int(
-            _frontier_box(self._map.state, self._frontier,
+            _frontier_box(self._map.state, self._frontier, self._bits,
                           lo[0], lo[1], lo[2], hi[0], hi[1], hi[2])
         )
 
@@ -335,11 +379,13 @@ class FrontierTracker:
         self.update()
         if self._count == 0:
             return []
-        indices = _true_indices(self._frontier, self._count)  # (F, 3), C order
         _, ny, nz = self._map.shape
-        components, n = _connected(indices, np.zeros(len(indices), dtype=np.int64), ny, nz)
+        indices = _true_indices(self._bits, ny, nz, self._count)  # (F, 3), C order
+        # The neighbour pairs are found once; the components, then their cells, join along them.
+        pairs = _adjacent_pairs(indices, ny, nz)
+        components, n = _joined(pairs, np.zeros(len(indices), dtype=np.int64), len(indices))
         keys = _cell_keys(indices, components, n, max_extent_m / self._map.voxel_size)
-        labels, n = _connected(indices, keys, ny, nz)
+        labels, n = _joined(pairs, keys, len(indices))
 
         sizes = np.bincount(labels, minlength=n)
         mean_dir, centre_sums = _label_sums(self._map.state, indices, labels, n,

@@ -84,8 +84,15 @@ def test_incremental_frontier_equals_full_recompute() -> None:
         expected = reference_frontier(m.state)
         np.testing.assert_array_equal(tracker.frontier, expected)
         assert tracker.count == np.count_nonzero(expected)
+        # The bits the clusters list the frontier from hold the same set.
+        bits = np.unpackbits(tracker._bits.view(np.uint8), bitorder="little")[:expected.size]
+        np.testing.assert_array_equal(bits.astype(bool).reshape(expected.shape), expected)
     assert tracker.count > 0
     np.testing.assert_array_equal(FrontierTracker(m).frontier, tracker.frontier)
+    tracker.full_recompute()
+    np.testing.assert_array_equal(
+        np.unpackbits(tracker._bits.view(np.uint8), bitorder="little")[:m.state.size]
+        .astype(bool).reshape(m.shape), tracker.frontier)
 
 
 def test_frontier_update_is_limited_to_the_dirty_box() -> None:
@@ -251,15 +258,19 @@ def test_cell_keys_cut_each_component_box_into_equal_cells() -> None:
     assert len(set(keys[labels == 0]) & set(keys[labels == 1])) == 0
 
 
-@pytest.mark.parametrize("shape", [(30, 25, 12), (7, 3, 5), (1, 1, 3), (9, 9, 8)])
+@pytest.mark.parametrize("shape", [(30, 25, 12), (7, 3, 5), (1, 1, 3), (9, 9, 8), (5, 4, 33)])
 def test_true_indices_are_numpys_argwhere(shape: tuple[int, int, int]) -> None:
-    """`_true_indices` (eight voxels read at a time) lists the set voxels in C order, grids
-    whose size is not a multiple of eight and voxels in the last, partial word included."""
+    """`_true_indices` (64 voxels read at a time, only their set bits visited) lists the set
+    voxels in C order, grids whose size is not a multiple of 64 and voxels in the last,
+    partial word included, as do every bit of a word and none."""
     from sim.frontiers import _true_indices
 
     rng = np.random.default_rng(len(shape) + shape[0])
     for density in (0.0, 0.01, 0.3, 1.0):
         mask = rng.random(shape) < density
         mask.reshape(-1)[-1] = density > 0.0
-        got = _true_indices(mask, int(np.count_nonzero(mask)))
+        flat = np.zeros(-(-mask.size // 64) * 64, dtype=bool)
+        flat[:mask.size] = mask.reshape(-1)
+        bits = np.packbits(flat, bitorder="little").view(np.uint64)
+        got = _true_indices(bits, shape[1], shape[2], int(np.count_nonzero(mask)))
         np.testing.assert_array_equal(got, np.argwhere(mask))
