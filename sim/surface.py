@@ -66,11 +66,13 @@ def _observe(camera: FloatArray, points: FloatArray, grid_origin: FloatArray, vo
         if i < 0 or j < 0 or k < 0 or i >= nx or j >= ny or k >= nz:
             continue
         flat = (i * ny + j) * nz + k
-        # One frame adds at most one to a voxel's weight, however many pixels land in it.
-        if stamp[flat] != frame:
-            stamp[flat] = frame
-            if weight[i, j, k] < WEIGHT_MAX:
-                weight[i, j, k] += 1
+        # One frame adds at most one to a voxel's weight, however many pixels land in it; the
+        # sector depends on the voxel and the camera alone, so its first pixel sets it too.
+        if stamp[flat] == frame:
+            continue
+        stamp[flat] = frame
+        if weight[i, j, k] < WEIGHT_MAX:
+            weight[i, j, k] += 1
         cx = grid_origin[0] + (i + 0.5) * voxel_size
         cy = grid_origin[1] + (j + 0.5) * voxel_size
         directions[i, j, k] |= np.uint8(1 << _sector(camera[0] - cx, camera[1] - cy))

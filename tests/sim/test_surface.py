@@ -135,3 +135,30 @@ def test_a_flight_fills_the_layers_on_the_measured_surface() -> None:
     assert occupied_share > 0.7
     # Walls seen from more than one side of the room show more than one sector.
     assert np.any(np.bitwise_count(watching.directions) >= 2)
+
+
+def test_layers_match_a_point_by_point_reference_with_many_points_per_voxel() -> None:
+    """Each point's voxel gets one weight per frame and the sector the camera stands in as
+    seen from that voxel's centre, whatever the number of points in it; the box returned is
+    the box of those voxels."""
+    rng = np.random.default_rng(8)
+    occupancy, layers = _layers()
+    weight = np.zeros(occupancy.shape, dtype=np.int64)
+    directions = np.zeros(occupancy.shape, dtype=np.int64)
+    for _ in range(30):
+        camera = rng.uniform(-0.5, 2.5, 3)
+        centres = rng.uniform(0.0, 2.0, (40, 3)) * [1.0, 1.0, 0.5]
+        points = np.repeat(centres, 6, axis=0) + rng.uniform(-0.04, 0.04, (240, 3))
+        box = layers.observe(camera, points)
+        idx = np.floor(points / VOXEL).astype(np.int64)
+        inside = np.all((idx >= 0) & (idx < occupancy.shape), axis=1)
+        voxels = np.unique(idx[inside], axis=0)
+        for v in voxels:
+            weight[tuple(v)] = min(weight[tuple(v)] + 1, WEIGHT_MAX)
+            centre = (v + 0.5) * VOXEL
+            directions[tuple(v)] |= 1 << int(direction_sector(camera[0] - centre[0],
+                                                              camera[1] - centre[1]))
+        assert box is not None
+        assert box.lo == tuple(voxels.min(axis=0)) and box.hi == tuple(voxels.max(axis=0) + 1)
+    np.testing.assert_array_equal(layers.weight, weight)
+    np.testing.assert_array_equal(layers.directions, directions)
