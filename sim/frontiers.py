@@ -219,19 +219,6 @@ def _joined(pairs: npt.NDArray[np.int32], key: IndexArray, count: int) -> tuple[
     return labels, n
 
 
-def _connected(indices: IndexArray, key: IndexArray, ny: int, nz: int) -> tuple[IndexArray, int]:
-    """26-connected components of a voxel set, joining only voxels with equal `key`.
-
-    indices: (K, 3) int64 distinct voxels of a grid with `ny` x `nz` columns, in C order.
-    key: (K,) int64.
-
-    Returns:
-        (K,) int64 labels 0 .. n-1 numbered in C order of each component's first voxel, and n.
-    """
-    labels, n = _joined(_adjacent_pairs(indices, ny, nz), key, len(indices))
-    return labels, int(n)
-
-
 @numba.njit(cache=True)
 def _label_boxes(indices: IndexArray, labels: IndexArray, n: int) -> tuple[IndexArray, IndexArray]:
     """(n, 3) min and (n, 3) max voxel index of each label; indices (K, 3), labels (K,)."""

@@ -326,9 +326,9 @@ def integrate_rays(
             elif hit_tag < tag <= recorded_tag:
                 continue  # updated in this batch already
             else:
+                # Never `SETTLED` here: the walk left those voxels out of `buf` (a settled hit
+                # voxel, its bit cleared, takes the branch above).
                 returns = np.int64(words[2 * v + 1])
-                if returns == SETTLED:
-                    continue  # FREE at the floor, no returns: a miss changes nothing
                 if returns >= lone:
                     if margin < 0.0:
                         length = math.sqrt(dx * dx + dy * dy + dz * dz)

@@ -203,13 +203,13 @@ def test_trackers_share_the_map_at_their_own_pace() -> None:
 
 
 def test_components_are_scipys_26_connected_labels_numbered_in_c_order() -> None:
-    """`_connected` joins 26-neighbours with equal keys (looking only at the 13 neighbours
-    before each voxel): the components of scipy's labelling of each key's voxels, numbered by
-    their first voxel in C order, in grids with voxels on every face (where a neighbour's flat
-    index wraps into the next row or plane)."""
+    """`_joined` over `_adjacent_pairs` joins 26-neighbours with equal keys (pairs found from
+    the 13 neighbours before each voxel): the components of scipy's labelling of each key's
+    voxels, numbered by their first voxel in C order, in grids with voxels on every face (where
+    a neighbour's flat index wraps into the next row or plane)."""
     from scipy import ndimage
 
-    from sim.frontiers import _connected
+    from sim.frontiers import _adjacent_pairs, _joined
 
     rng = np.random.default_rng(0)
     shapes = [(30, 25, 12), (1, 9, 7), (8, 1, 6), (7, 9, 1), (2, 2, 2), (12, 3, 40)]
@@ -219,7 +219,7 @@ def test_components_are_scipys_26_connected_labels_numbered_in_c_order() -> None
         indices = np.argwhere(mask).astype(np.int64)
         keys = (rng.integers(0, 3, len(indices)) if trial % 2
                 else np.zeros(len(indices))).astype(np.int64)
-        labels, n = _connected(indices, keys, shape[1], shape[2])
+        labels, n = _joined(_adjacent_pairs(indices, shape[1], shape[2]), keys, len(indices))
         component = np.empty(len(indices), dtype=np.int64)
         offset = 0
         for value in np.unique(keys):
