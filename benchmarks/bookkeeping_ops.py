@@ -15,13 +15,14 @@ fastest of `--repeats` each, and says whether their results agree:
 - every mesh vertex's distance to the area's surface: `sim.mesh_distance` against Open3D's
   `RaycastingScene.compute_distance` (float32; "agree" counts vertices more than 10 µm apart);
 - the final recall's within-tau count: `sim.cell_lists.share_within` against scipy's k-d tree;
-- the final mesh: `sim.tsdf_slabs.mesh_in_slabs` (Open3D's marching cubes, slab by slab, for
-  its memory) against one extraction of the whole grid ("agree": the same vertices and as many
-  triangles).
+- the final mesh: `sim.tsdf_mesh.marching_cubes` against Open3D's `extract_triangle_mesh` of
+  the whole grid ("agree": `sim.tsdf_mesh.same_mesh`, the same vertices to the bit and the
+  same triangles with their winding).
 
 With `--baseline DIR` (an unpacked `git archive` of another commit), the surface points are
 also timed against that tree's `sim/tsdf_points.py` on the same grid, and must be identical,
-in the same order.
+in the same order; and the final mesh against that tree's (`sim/tsdf_mesh.py`, or before it
+`sim/tsdf_slabs.py`, Open3D's marching cubes in slabs), and must be the same mesh.
 """
 
 from __future__ import annotations
@@ -52,8 +53,8 @@ from sim.open3d_any import o3c
 from sim.planning_charge import PlanningCharge
 from sim.reference_speed import speed_factor
 from sim.tsdf import TsdfVolume
+from sim.tsdf_mesh import marching_cubes, open3d_mesh, same_mesh
 from sim.tsdf_points import crossing_points
-from sim.tsdf_slabs import extract_mesh
 
 
 def fastest(repeats: int, *calls: Callable[[], Any]) -> tuple[list[float], list[Any]]:
@@ -101,12 +102,6 @@ def read_through_table(tsdf: TsdfVolume, points: np.ndarray) -> tuple[np.ndarray
     return sdf * cfg.voxel_size_m * cfg.trunc_voxel_multiplier, weight
 
 
-def whole_grid_mesh(tsdf: TsdfVolume) -> tuple[np.ndarray, np.ndarray]:
-    """One Open3D extraction of the whole grid (what `mesh_in_slabs` does slab by slab)."""
-    vertices, triangles = extract_mesh(tsdf.grid, tsdf.config.weight_threshold)
-    return vertices.astype(np.float64), triangles
-
-
 def rows_sorted(points: np.ndarray) -> np.ndarray:
     return points[np.lexsort(points.T[::-1])]
 
@@ -118,8 +113,19 @@ def baseline_crossing_points(tree: Path) -> Callable[..., np.ndarray]:
     return found
 
 
+def baseline_mesh(tree: Path) -> Callable[..., tuple[np.ndarray, np.ndarray]]:
+    """The final mesh of another tree: its `sim/tsdf_mesh.py::marching_cubes`, or (before that
+    module) its `sim/tsdf_slabs.py::mesh_in_slabs`."""
+    if (tree / "sim" / "tsdf_mesh.py").exists():
+        found: Callable[..., tuple[np.ndarray, np.ndarray]] = baseline_module(
+            tree, "sim/tsdf_mesh.py", "baseline_tsdf_mesh").marching_cubes
+    else:
+        found = baseline_module(tree, "sim/tsdf_slabs.py", "baseline_tsdf_slabs").mesh_in_slabs
+    return found
+
+
 def measure(area_name: str, seconds: float | None, repeats: int,
-            baseline: Callable[..., np.ndarray] | None = None) -> list[dict[str, Any]]:
+            baseline: Path | None = None) -> list[dict[str, Any]]:
     area = load_area(area_name)
     truth = load_ground_truth(area)
     config = preset("default")
@@ -150,7 +156,7 @@ def measure(area_name: str, seconds: float | None, repeats: int,
         same = np.array_equal(rows_sorted(ours), rows_sorted(ref))
         add(f"surface points ({len(ours):,})", times, "identical" if same else "DIFFER")
         if baseline is not None:
-            before = baseline
+            before = baseline_crossing_points(baseline)
             times, (ours, ref) = fastest(
                 repeats, lambda: crossing_points(grid, cfg.voxel_size_m, cfg.weight_threshold),
                 lambda: before(grid, cfg.voxel_size_m, cfg.weight_threshold))
@@ -192,11 +198,17 @@ def measure(area_name: str, seconds: float | None, repeats: int,
                 final_points, k=1, distance_upper_bound=bound)[0]))) / len(final_points))
         add("recall count", times, "identical" if ours == ref else "DIFFER")
 
-        times, (ours, ref) = fastest(repeats, tsdf.mesh, lambda: whole_grid_mesh(tsdf))
-        same = (len(ours[1]) == len(ref[1])
-                and np.array_equal(rows_sorted(ours[0]), rows_sorted(ref[0])))
+        times, (ours, ref) = fastest(repeats, tsdf.mesh,
+                                     lambda: open3d_mesh(grid, cfg.weight_threshold))
         add(f"final mesh ({len(ours[0]):,} vertices)", times,
-            "identical vertices and triangle count" if same else "DIFFER")
+            "the same mesh" if same_mesh(ours, ref) else "DIFFER")
+        if baseline is not None:
+            mesh_before = baseline_mesh(baseline)
+            times, (ours, ref) = fastest(
+                repeats, lambda: marching_cubes(grid, cfg.voxel_size_m, cfg.weight_threshold),
+                lambda: mesh_before(grid, cfg.voxel_size_m, cfg.weight_threshold))
+            add("final mesh, against --baseline", times,
+                "the same mesh" if same_mesh(ours, ref) else "DIFFER")
         return ops
     finally:
         loop.close()
@@ -209,11 +221,10 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--out", default="bookkeeping_ops")
     parser.add_argument("--baseline", type=Path, default=None,
-                        help="another tree's folder, whose surface points are timed too")
+                        help="another tree's folder, whose surface points and mesh are timed too")
     args = parser.parse_args()
     seconds = None if args.seconds == "plateau" else float(args.seconds)
-    before = None if args.baseline is None else baseline_crossing_points(args.baseline)
-    ops = [op for name in args.areas for op in measure(name, seconds, args.repeats, before)]
+    ops = [op for name in args.areas for op in measure(name, seconds, args.repeats, args.baseline)]
     print_table("A run's bookkeeping at its end: ours against the reference (s, fastest of "
                 f"{args.repeats})", ["area", "operation", "ours s", "reference s", "ratio",
                                      "results"],

@@ -13,9 +13,10 @@ from pydantic import BaseModel, ConfigDict, Field
 from sim.camera import BODY_FROM_OPTICAL
 from sim.geometry import FloatArray, Pose, yaw_matrix
 from sim.open3d_any import o3c, o3d
+from sim.tsdf_blocks import block_grid
+from sim.tsdf_mesh import marching_cubes
 from sim.tsdf_points import crossing_points
 from sim.tsdf_sampling import trilinear
-from sim.tsdf_slabs import block_grid, mesh_in_slabs
 
 # Open3D doubles a full block table, and a table's blocks are resident whether used or not
 # (4 KiB each, zeroed): a FACILITY C run that needed 42,800 blocks held 80,000, and for the
@@ -136,8 +137,7 @@ class TsdfVolume:
         """Marching-cubes mesh of the fused surface: (V, 3) vertices and (F, 3) triangles."""
         if self.frames == 0:
             return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int32)
-        # In slabs: one extraction of the whole grid needs 8 KiB of scratch per block.
-        return mesh_in_slabs(self._grid, self.config.voxel_size_m, self.config.weight_threshold)
+        return marching_cubes(self._grid, self.config.voxel_size_m, self.config.weight_threshold)
 
     def sdf_at(self, points: npt.NDArray[np.floating]) -> tuple[
         npt.NDArray[np.float64], npt.NDArray[np.float32]

@@ -1,5 +1,6 @@
-"""The TSDF's voxel blocks as arrays for compiled code: views of an Open3D `VoxelBlockGrid`'s
-buffers, and its blocks sorted by key so that a block is found by binary search."""
+"""The TSDF's voxel blocks: the Open3D `VoxelBlockGrid` that holds them, and its buffers as
+arrays for compiled code, without copies, its blocks sorted by key so that a block is found by
+binary search."""
 
 from __future__ import annotations
 
@@ -9,6 +10,19 @@ from typing import Any
 import numba
 import numpy as np
 import numpy.typing as npt
+
+from sim.open3d_any import o3c, o3d
+
+_CPU = o3c.Device("CPU:0")
+
+
+def block_grid(voxel_size: float, resolution: int, block_count: int) -> Any:
+    """An empty CPU `VoxelBlockGrid` with float32 "tsdf" and "weight" per voxel."""
+    return o3d.t.geometry.VoxelBlockGrid(
+        attr_names=("tsdf", "weight"), attr_dtypes=(o3c.float32, o3c.float32),
+        attr_channels=((1), (1)), voxel_size=voxel_size, block_resolution=resolution,
+        block_count=block_count, device=_CPU,
+    )
 
 
 @dataclass(frozen=True)
