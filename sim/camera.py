@@ -150,10 +150,7 @@ class DepthCamera:
         """(P, 6) float32 rays Embree casts for the image from `pose` at `stride`: the camera
         centre and each kept pixel's unit direction, world frame, C order."""
         unit_dirs = self._unit_directions(stride) @ self.world_from_optical(pose.yaw).T
-        rays = np.empty((unit_dirs.shape[0], 6), dtype=np.float32)
-        rays[:, :3] = pose.position
-        rays[:, 3:] = unit_dirs
-        return rays
+        return _ray_rows(np.asarray(pose.position, dtype=np.float64), unit_dirs)
 
     def render(self, pose: Pose, time: float = 0.0, stride: int = 1) -> DepthFrame:
         """Ray-cast one depth image from `pose`; with `stride` > 1 only every stride-th row and
@@ -187,6 +184,21 @@ class DepthCamera:
         points_optical = dirs * z[:, None]
         endpoints = points_optical @ self.world_from_optical(pose.yaw).T + pose.position
         return endpoints, hit
+
+
+@numba.njit(cache=True)
+def _ray_rows(origin: FloatArray, unit_dirs: FloatArray) -> npt.NDArray[np.float32]:
+    """(P, 6) float32 rows of `origin` (3,) and each of `unit_dirs` (P, 3), rounded to float32
+    as NumPy's assignment rounds them, in one pass (NumPy's two strided assignments cost
+    more than the rotation before them)."""
+    out = np.empty((unit_dirs.shape[0], 6), dtype=np.float32)
+    o0, o1, o2 = np.float32(origin[0]), np.float32(origin[1]), np.float32(origin[2])
+    for i in range(unit_dirs.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2] = o0, o1, o2
+        out[i, 3] = np.float32(unit_dirs[i, 0])
+        out[i, 4] = np.float32(unit_dirs[i, 1])
+        out[i, 5] = np.float32(unit_dirs[i, 2])
+    return out
 
 
 @numba.njit(cache=True)

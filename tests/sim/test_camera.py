@@ -346,3 +346,19 @@ def test_depth_is_the_numpy_formulation_to_the_bit(stride: int) -> None:
         finite += int(np.isfinite(expected).sum())
         missing += int(np.isnan(expected).sum())
     assert finite > 1000 and missing > 1000
+
+
+@pytest.mark.parametrize("stride", [1, 2, 3])
+def test_rays_are_numpys_rounding_of_the_rotated_directions(stride: int) -> None:
+    cam = camera(ODD)
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        pose = Pose(rng.uniform(-50.0, 50.0, 3) * rng.choice([1e-3, 1.0, 1e3]),
+                    float(rng.uniform(-np.pi, np.pi)))
+        unit_dirs = cam._unit_directions(stride) @ cam.world_from_optical(pose.yaw).T
+        expected = np.empty((unit_dirs.shape[0], 6), dtype=np.float32)
+        expected[:, :3] = pose.position
+        expected[:, 3:] = unit_dirs
+        rays = cam.rays(pose, stride)
+        assert rays.dtype == np.float32 and rays.shape == expected.shape
+        assert np.array_equal(rays.view(np.uint32), expected.view(np.uint32))
