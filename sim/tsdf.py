@@ -14,7 +14,7 @@ from sim.camera import BODY_FROM_OPTICAL
 from sim.geometry import FloatArray, Pose, yaw_matrix
 from sim.open3d_any import o3c, o3d
 from sim.tsdf_blocks import block_grid
-from sim.tsdf_mesh import marching_cubes
+from sim.tsdf_mesh import MAX_RESOLUTION, marching_cubes
 from sim.tsdf_points import crossing_points
 from sim.tsdf_sampling import trilinear
 
@@ -40,7 +40,9 @@ class TsdfConfig(BaseModel):
 
     voxel_size_m: float = Field(0.05, gt=0.0)
     trunc_voxel_multiplier: float = Field(3.0, gt=0.0)
-    block_resolution: int = Field(8, ge=2)
+    # At most `sim.tsdf_mesh.MAX_RESOLUTION`: the marching cubes ranks a block's vertices in 13
+    # bits.
+    block_resolution: int = Field(8, ge=2, le=MAX_RESOLUTION)
     initial_block_count: int = Field(20000, ge=100)
     weight_threshold: float = Field(1.0, ge=0.0, description="min weight for extracted surface")
 

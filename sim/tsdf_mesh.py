@@ -32,7 +32,8 @@ import numpy.typing as npt
 from sim.open3d_any import o3c
 from sim.tsdf_blocks import BlockArrays, block_arrays, block_grid
 
-__all__ = ["case_tables", "marching_cubes", "open3d_mesh", "same_mesh"]
+__all__ = ["EDGE_SHIFTS", "MAX_RESOLUTION", "case_tables", "marching_cubes", "open3d_mesh",
+           "same_mesh"]
 
 Vertices = npt.NDArray[np.float64]
 Triangles = npt.NDArray[np.int32]

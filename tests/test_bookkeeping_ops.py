@@ -11,27 +11,35 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.bookkeeping_ops import baseline_crossing_points, measure
+from benchmarks.bookkeeping_ops import baseline_mesh, measure
 from benchmarks.common import baseline_module
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_each_operation_agrees_with_the_one_it_replaced() -> None:
-    """This tree stands in as its own `--baseline` too: its surface points match its own."""
-    ops = {op["operation"].split(" (")[0]: op
-           for op in measure("maze", 30.0, 1, baseline_crossing_points(ROOT))}
+    """This tree stands in as its own `--baseline` too: its surface points and mesh match its
+    own."""
+    ops = {op["operation"].split(" (")[0]: op for op in measure("maze", 30.0, 1, ROOT)}
     assert set(ops) == {"surface points", "surface points, against --baseline",
                         "thinning a snapshot", "TSDF at 20,000 points", "vertex distances",
-                        "recall count", "final mesh"}
+                        "recall count", "final mesh", "final mesh, against --baseline"}
     assert ops.pop("surface points, against --baseline")["agree"] == "identical, same order"
-    mesh = ops.pop("final mesh")
-    assert mesh["agree"] == "identical vertices and triangle count", mesh["agree"]
+    for name in ("final mesh", "final mesh, against --baseline"):
+        mesh = ops.pop(name)
+        assert mesh["agree"] == "the same mesh", (name, mesh["agree"])
     for name, op in ops.items():
         assert op["ours_s"] > 0.0 and op["reference_s"] > 0.0
         if name != "vertex distances":
             assert op["agree"] == "identical", (name, op["agree"])
     assert ops["vertex distances"]["agree"].startswith("0 over 10 µm apart")
+
+
+def test_a_baseline_tree_before_the_compiled_mesh_is_timed_by_its_slabs(tmp_path: Path) -> None:
+    (tmp_path / "sim").mkdir()
+    (tmp_path / "sim" / "tsdf_slabs.py").write_text("def mesh_in_slabs(*args):\n    return args\n")
+    assert baseline_mesh(tmp_path)(1, 2, 3) == (1, 2, 3)
+    assert baseline_mesh(ROOT).__name__ == "marching_cubes"
 
 
 def test_a_baseline_module_compiles_apart_from_its_tree(tmp_path: Path) -> None:

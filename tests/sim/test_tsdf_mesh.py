@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 import pytest
+from pydantic import ValidationError
 
 from areas import load_area
 from sim.camera import DepthCamera
@@ -104,6 +105,8 @@ def test_blocks_larger_than_the_codes_hold_are_refused() -> None:
     keys, tsdf, weight = _field(5, res=14)
     with pytest.raises(ValueError, match="at most 13"):
         marching_cubes(_grid(keys, tsdf, weight, res=14), VOXEL, THRESHOLD)
+    with pytest.raises(ValidationError, match="block_resolution"):
+        TsdfConfig(block_resolution=14)
 
 
 def test_vertices_that_coincide_are_kept_apart() -> None:
