@@ -77,6 +77,24 @@ def flat_keys(keys: npt.NDArray[np.int64], origin: npt.NDArray[np.int64],
     return (rel[:, 0] * span[1] + rel[:, 1]) * span[2] + rel[:, 2]
 
 
+def upper_neighbours(blocks: BlockArrays) -> npt.NDArray[np.int64]:
+    """(B, 8): for each block in key order (`blocks.order`), the position in that order of the
+    block at offset (k & 1, (k >> 1) & 1, (k >> 2) & 1) from it (k = 0 is the block itself; 1,
+    2 and 4 the next along x, y and z), -1 where none is allocated. The keys' flattening keeps
+    a block of margin, so an offset key stays inside it."""
+    span = blocks.span
+    step = np.array([span[1] * span[2], span[2], 1], dtype=np.int64)
+    found = np.full((len(blocks.order), 8), -1, dtype=np.int64)
+    for k in range(8):
+        wanted = blocks.sorted_keys + (k & 1) * step[0] + (k >> 1 & 1) * step[1] + (k >> 2 & 1)
+        at = np.searchsorted(blocks.sorted_keys, wanted)
+        inside = at < len(blocks.sorted_keys)
+        hit = np.zeros(len(wanted), dtype=bool)
+        hit[inside] = blocks.sorted_keys[at[inside]] == wanted[inside]
+        found[hit, k] = at[hit]
+    return found
+
+
 @numba.njit(cache=True)
 def slot_of(sorted_keys: npt.NDArray[np.int64], order: npt.NDArray[np.int64],
             origin: npt.NDArray[np.int64], span: npt.NDArray[np.int64], bx: int, by: int,

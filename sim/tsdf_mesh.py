@@ -30,7 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from sim.open3d_any import o3c
-from sim.tsdf_blocks import BlockArrays, block_arrays, block_grid
+from sim.tsdf_blocks import block_arrays, block_grid, upper_neighbours
 
 __all__ = ["EDGE_SHIFTS", "MAX_RESOLUTION", "case_tables", "marching_cubes", "open3d_mesh",
            "same_mesh"]
@@ -128,7 +128,7 @@ def marching_cubes(grid: Any, voxel_size: float,
     if blocks is None:
         return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int32)
     edges, table = case_tables()
-    after = _neighbours(blocks)
+    after = upper_neighbours(blocks)
     res = blocks.tsdf.shape[1]
     if res > MAX_RESOLUTION:
         raise ValueError(f"marching cubes takes blocks of at most {MAX_RESOLUTION}³ voxels, "
@@ -136,7 +136,8 @@ def marching_cubes(grid: Any, voxel_size: float,
     cases = np.zeros((len(blocks.order), res, res, res), dtype=np.uint8)
     codes = np.zeros((len(blocks.order), res, res, res), dtype=np.uint16)
     n_triangles = _mark(blocks.order, after, blocks.tsdf, blocks.weight,
-                        np.float32(weight_threshold), edges, table, EDGE_SHIFTS, cases, codes)
+                        np.float32(weight_threshold), edges, (table >= 0).sum(axis=1) // 3,
+                        EDGE_SHIFTS, cases, codes)
     starts = _rank(codes)
     vertices = np.empty((int(starts[-1]), 3), dtype=np.float64)
     _place(blocks.keys, blocks.order, after, blocks.tsdf, codes, starts,
@@ -194,24 +195,6 @@ def _triangle_rows(vertices: npt.NDArray[np.float32], triangles: Int64s) -> Int6
     return _sorted_rows(least)
 
 
-def _neighbours(blocks: BlockArrays) -> Int64s:
-    """(B, 8): for each block in key order, the position in that order of the block at
-    offset (k & 1, (k >> 1) & 1, (k >> 2) & 1) from it (k = 0 is the block itself), -1 where
-    none is allocated. The keys' flattening keeps a block of margin, so an offset key stays
-    inside it."""
-    span = blocks.span
-    step = np.array([span[1] * span[2], span[2], 1], dtype=np.int64)
-    found = np.full((len(blocks.order), 8), -1, dtype=np.int64)
-    for k in range(8):
-        wanted = blocks.sorted_keys + _CORNERS[k] @ step
-        at = np.searchsorted(blocks.sorted_keys, wanted)
-        inside = at < len(blocks.sorted_keys)
-        hit = np.zeros(len(wanted), dtype=bool)
-        hit[inside] = blocks.sorted_keys[at[inside]] == wanted[inside]
-        found[hit, k] = at[hit]
-    return found
-
-
 @numba.njit(cache=True)
 def _corner(after: Int64s, p: int, x: int, y: int, z: int,
             res: int) -> tuple[int, int, int, int]:  # pragma: no cover - numba
@@ -229,8 +212,8 @@ def _corner(after: Int64s, p: int, x: int, y: int, z: int,
 
 @numba.njit(cache=True)
 def _mark(order: Int64s, after: Int64s, tsdf: npt.NDArray[np.float32],
-          weight: npt.NDArray[np.float32], limit: np.float32, edges: Int64s, table: Int64s,
-          shifts: Int64s, cases: npt.NDArray[np.uint8],
+          weight: npt.NDArray[np.float32], limit: np.float32, edges: Int64s,
+          triangle_counts: Int64s, shifts: Int64s, cases: npt.NDArray[np.uint8],
           codes: npt.NDArray[np.uint16]) -> int:  # pragma: no cover - numba
     """Writes each counted cube's case to `cases` (0 for none) and sets, in `codes`, bit `axis`
     of the voxel owning each edge that carries a vertex; returns the number of triangles."""
@@ -267,10 +250,7 @@ def _mark(order: Int64s, after: Int64s, tsdf: npt.NDArray[np.float32],
                             q, ox, oy, oz = _corner(after, p, x + shifts[e, 0],
                                                     y + shifts[e, 1], z + shifts[e, 2], res)
                             codes[q, oz, oy, ox] |= np.uint16(1 << shifts[e, 3])
-                    t = 0
-                    while t < 16 and table[case, t] >= 0:
-                        n_triangles += 1
-                        t += 3
+                    n_triangles += triangle_counts[case]
     return n_triangles
 
 

@@ -12,7 +12,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-from sim.tsdf_blocks import block_arrays, slot_of
+from sim.tsdf_blocks import block_arrays, upper_neighbours
 
 
 def crossing_points(grid: Any, voxel_size: float,
@@ -27,8 +27,9 @@ def crossing_points(grid: Any, voxel_size: float,
     blocks = block_arrays(grid)
     if blocks is None:
         return np.zeros((0, 3), dtype=np.float32)
-    after = _next_blocks(blocks.keys, blocks.order, blocks.sorted_keys, blocks.origin,
-                         blocks.span)
+    # For each block, the slot of the next block along x, y and z (-1: none), (B, 3).
+    nearby = upper_neighbours(blocks)[:, [1, 2, 4]]
+    after = np.where(nearby >= 0, blocks.order[nearby], -1)
     limit, voxel = np.float32(weight_threshold), np.float32(voxel_size)
     # A cheap count per block first, so that the points are written once, in place, and the
     # blocks without a crossing (many, in the truncation band around the surface) are skipped.
@@ -38,22 +39,6 @@ def crossing_points(grid: Any, voxel_size: float,
     _crossings(blocks.keys, blocks.order, after, blocks.tsdf, blocks.weight, limit, voxel,
                counts, ends - counts, points)
     return points
-
-
-@numba.njit(cache=True)
-def _next_blocks(keys: npt.NDArray[np.int32], order: npt.NDArray[np.int64],
-                 sorted_keys: npt.NDArray[np.int64], origin: npt.NDArray[np.int64],
-                 span: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:  # pragma: no cover
-    """For each block in `order`, the slot of the block after it along x, y and z (-1: none),
-    (B, 3)."""
-    after = np.full((order.shape[0], 3), -1, np.int64)
-    for p in range(order.shape[0]):
-        slot = order[p]
-        bx, by, bz = keys[slot, 0], keys[slot, 1], keys[slot, 2]
-        after[p, 0] = slot_of(sorted_keys, order, origin, span, bx + 1, by, bz)
-        after[p, 1] = slot_of(sorted_keys, order, origin, span, bx, by + 1, bz)
-        after[p, 2] = slot_of(sorted_keys, order, origin, span, bx, by, bz + 1)
-    return after
 
 
 @numba.njit(cache=True)
