@@ -14,6 +14,7 @@ from sim.camera import BODY_FROM_OPTICAL
 from sim.geometry import FloatArray, Pose, yaw_matrix
 from sim.open3d_any import o3c, o3d
 from sim.tsdf_blocks import block_grid
+from sim.tsdf_fusion import FusionParameters, fuse_depth
 from sim.tsdf_mesh import MAX_RESOLUTION, marching_cubes
 from sim.tsdf_points import crossing_points
 from sim.tsdf_sampling import trilinear
@@ -76,6 +77,8 @@ class TsdfVolume:
         self.config = config
         self._intrinsic = o3c.Tensor(np.asarray(intrinsic, dtype=np.float64))
         self._max_range = float(max_range_m)
+        self._fusion = FusionParameters.of(intrinsic, config.voxel_size_m,
+                                           config.trunc_voxel_multiplier, max_range_m)
         self._grid = block_grid(
             config.voxel_size_m, config.block_resolution,
             max(config.initial_block_count, math.ceil(expected_blocks * EXPECTED_BLOCK_MARGIN)),
@@ -102,20 +105,21 @@ class TsdfVolume:
                                      np.float32(self._max_range))
         if not within:
             return  # nothing within range: Open3D would raise "no block is touched"
-        image = o3d.t.geometry.Image(o3c.Tensor(clean.reshape(depth.shape)))
-        ext = o3c.Tensor(self.extrinsic(pose))
-        mult = self.config.trunc_voxel_multiplier
+        clean = clean.reshape(depth.shape)
+        image = o3d.t.geometry.Image(o3c.Tensor(clean))
+        extrinsic = self.extrinsic(pose)
         try:
             blocks = self._grid.compute_unique_block_coordinates(
-                image, self._intrinsic, ext, 1.0, self._max_range, mult
+                image, self._intrinsic, o3c.Tensor(extrinsic), 1.0, self._max_range,
+                self.config.trunc_voxel_multiplier
             )
-            self._make_room(len(blocks))
-            self._grid.integrate(blocks, image, self._intrinsic, ext, 1.0, self._max_range,
-                                 mult)
         except RuntimeError as exc:
             if "block" not in str(exc).lower():
                 raise
             return  # a frame whose returns touch no voxel block: nothing to fuse
+        self._make_room(len(blocks))
+        # Open3D's `integrate` values to the bit, compiled (`sim.tsdf_fusion`).
+        fuse_depth(self._grid, blocks, clean, extrinsic, self._fusion)
         self.frames += 1
 
     def _make_room(self, touched: int) -> None:

@@ -1,0 +1,177 @@
+"""The compiled fusion of a depth frame: Open3D's `VoxelBlockGrid.integrate` values, to the bit."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+
+from areas import load_area
+from sim.camera import CameraConfig, DepthCamera
+from sim.geometry import Pose
+from sim.open3d_any import o3c, o3d
+from sim.tsdf import TsdfConfig, TsdfVolume
+from sim.tsdf_blocks import block_grid
+from sim.tsdf_fusion import FusionParameters, fuse_depth, open3d_fuse
+
+View = tuple[npt.NDArray[np.float32], Pose]
+
+
+def _contents(grid: object) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.uint32],
+                                     npt.NDArray[np.float32]]:
+    """The allocated blocks' keys, tsdf bits and weights, in key order (slots aside)."""
+    table = grid.hashmap()  # type: ignore[attr-defined]
+    slots = table.active_buf_indices().numpy().astype(np.int64)
+    keys = table.key_tensor().numpy()[slots]
+    order = np.lexsort(keys.T[::-1])
+    tsdf = grid.attribute("tsdf").numpy()  # type: ignore[attr-defined]
+    tsdf = tsdf.reshape(len(tsdf), -1)
+    weight = grid.attribute("weight").numpy().reshape(len(tsdf), -1)  # type: ignore[attr-defined]
+    return keys[order], tsdf[slots][order].view(np.uint32), weight[slots][order]
+
+
+def _assert_same_grids(a: object, b: object) -> int:
+    keys_a, tsdf_a, weight_a = _contents(a)
+    keys_b, tsdf_b, weight_b = _contents(b)
+    assert np.array_equal(keys_a, keys_b)
+    assert np.array_equal(weight_a, weight_b)
+    assert np.array_equal(tsdf_a, tsdf_b)
+    return int((weight_a > 0).sum())
+
+
+def _views(area_name: str, count: int, seed: int, camera_config: CameraConfig | None = None,
+           noise_m: float = 0.02) -> tuple[DepthCamera, list[View]]:
+    """`count` noisy views from random poses around the area's start (NaN where no return)."""
+    area = load_area(area_name)
+    camera = DepthCamera(area.vertices, area.triangles, camera_config or CameraConfig())
+    rng = np.random.default_rng(seed)
+    start = np.asarray(area.start.position, dtype=np.float64)
+    views = []
+    for _ in range(count):
+        pose = Pose(start + rng.uniform([-1.5, -1.5, -0.3], [1.5, 1.5, 0.6]),
+                    float(rng.uniform(-np.pi, np.pi)))
+        depth = camera.render(pose).depth
+        noisy = depth + rng.normal(0.0, noise_m, depth.shape).astype(np.float32)
+        views.append((noisy.astype(np.float32), pose))
+    return camera, views
+
+
+def _fuse_both(views: list[View], intrinsic: npt.NDArray[np.float64], config: TsdfConfig,
+               depth_max: float, extra_blocks: int = 0) -> int:
+    """Fuse the views into two grids, Open3D's way and the compiled way, over Open3D's touched
+    blocks (plus, with `extra_blocks`, a cube of blocks of that half-width around the camera,
+    most of them behind it or outside the image); compare the grids after every frame."""
+    ours = block_grid(config.voxel_size_m, config.block_resolution, 20000)
+    theirs = block_grid(config.voxel_size_m, config.block_resolution, 20000)
+    params = FusionParameters.of(intrinsic, config.voxel_size_m, config.trunc_voxel_multiplier,
+                                 depth_max)
+    k = o3c.Tensor(np.asarray(intrinsic, dtype=np.float64))
+    block = config.voxel_size_m * config.block_resolution
+    fused = 0
+    for depth, pose in views:
+        clean = np.nan_to_num(depth, nan=0.0).astype(np.float32)
+        extrinsic = TsdfVolume.extrinsic(pose)
+        try:
+            coords = theirs.compute_unique_block_coordinates(
+                o3d.t.geometry.Image(o3c.Tensor(clean)), k, o3c.Tensor(extrinsic), 1.0,
+                depth_max, config.trunc_voxel_multiplier).numpy()
+        except RuntimeError:  # no return within range (a pose facing a wall's back)
+            coords = np.zeros((0, 3), dtype=np.int32)
+        if extra_blocks:
+            centre = np.floor(pose.position / block).astype(np.int32)
+            span = np.arange(-extra_blocks, extra_blocks + 1, dtype=np.int32)
+            cube = np.stack(np.meshgrid(span, span, span, indexing="ij"), -1).reshape(-1, 3)
+            coords = np.unique(np.concatenate([coords, centre + cube]), axis=0)
+        if len(coords) == 0:
+            continue
+        tensor = o3c.Tensor(np.ascontiguousarray(coords, dtype=np.int32))
+        open3d_fuse(theirs, tensor, clean, intrinsic, extrinsic, config.trunc_voxel_multiplier,
+                    depth_max)
+        fuse_depth(ours, tensor, clean, extrinsic, params)
+        fused = _assert_same_grids(ours, theirs)
+    return fused
+
+
+def test_noisy_views_of_maze_fuse_as_open3d_fuses_them() -> None:
+    camera, views = _views("maze", 24, seed=0)
+    assert _fuse_both(views, camera.config.intrinsic_matrix(), TsdfConfig(), 5.0) > 50_000
+
+
+def test_voxels_behind_the_camera_and_outside_the_image_are_left_alone() -> None:
+    camera, views = _views("maze", 6, seed=1)
+    config = TsdfConfig(voxel_size_m=0.1)
+    assert _fuse_both(views, camera.config.intrinsic_matrix(), config, 5.0, extra_blocks=3) > 0
+
+
+@pytest.mark.parametrize(("voxel", "res", "mult", "depth_max"), [
+    (0.05, 4, 3.0, 5.0), (0.05, 13, 1.7, 3.0), (0.08, 8, 4.5, 8.0), (0.037, 6, 2.3, 2.5),
+])
+def test_grid_and_camera_settings_fuse_as_open3d_fuses_them(
+        voxel: float, res: int, mult: float, depth_max: float) -> None:
+    camera, views = _views("offices-a", 8, seed=2,
+                           camera_config=CameraConfig(width=96, height=72, fov_h_deg=70.0))
+    config = TsdfConfig(voxel_size_m=voxel, block_resolution=res, trunc_voxel_multiplier=mult)
+    assert _fuse_both(views, camera.config.intrinsic_matrix(), config, depth_max) > 1000
+
+
+def test_returns_at_and_beyond_the_range_and_missing_ones() -> None:
+    """Depths of exactly 0, exactly the maximum, just above it and far beyond it."""
+    camera, views = _views("maze", 4, seed=3, noise_m=0.0)
+    rng = np.random.default_rng(4)
+    edited = []
+    for depth, pose in views:
+        d = depth.copy()
+        pick = rng.random(d.shape)
+        d[pick < 0.1] = np.nan
+        d[(pick >= 0.1) & (pick < 0.2)] = np.float32(3.0)
+        d[(pick >= 0.2) & (pick < 0.3)] = np.nextafter(np.float32(3.0), np.float32(4.0))
+        d[(pick >= 0.3) & (pick < 0.35)] = np.float32(40.0)
+        edited.append((d, pose))
+    assert _fuse_both(edited, camera.config.intrinsic_matrix(), TsdfConfig(), 3.0) > 1000
+
+
+def test_the_volume_fuses_as_open3d_fuses() -> None:
+    """`TsdfVolume.integrate` (NaN cleaning, the table's growth, the compiled fusion) against
+    Open3D's two calls on the same frames."""
+    camera, views = _views("maze", 10, seed=5)
+    config = TsdfConfig(initial_block_count=100)  # grows the table mid-way
+    volume = TsdfVolume(camera.config.intrinsic_matrix(), 5.0, config)
+    reference = block_grid(config.voxel_size_m, config.block_resolution, 100)
+    k = o3c.Tensor(camera.config.intrinsic_matrix())
+    for depth, pose in views:
+        volume.integrate(depth, pose)
+        image = o3d.t.geometry.Image(o3c.Tensor(np.nan_to_num(depth, nan=0.0)))
+        ext = o3c.Tensor(TsdfVolume.extrinsic(pose))
+        try:
+            coords = reference.compute_unique_block_coordinates(image, k, ext, 1.0, 5.0, 3.0)
+        except RuntimeError:  # no return within range: the volume fuses nothing either
+            continue
+        reference.integrate(coords, image, k, ext, 1.0, 5.0, 3.0)
+    assert volume.grid.hashmap().capacity() > 100
+    assert _assert_same_grids(volume.grid, reference) > 10_000
+
+
+@pytest.mark.parametrize("depth_value", [1.25, 1.5, 2.0, 2.75, 3.0, 3.5])
+def test_exact_boundaries_fuse_as_open3d_fuses_them(depth_value: float) -> None:
+    """Binary-exact numbers so that voxels land exactly on the boundaries: on the image's last
+    column and row (u = W - 1, v = H - 1), at zc = 0, at a depth exactly at the maximum (3.0)
+    and with the signed distance exactly minus and plus the truncation (0.75 with the voxels
+    at z = 2.0: depths 1.25 and 2.75)."""
+    voxel, res, mult, depth_max = 0.25, 4, 3.0, 3.0
+    width, height = 16, 12
+    # u = 10 * x / z + 10: the voxel at x = 1, z = 2 projects to u = 15 = W - 1 exactly.
+    intrinsic = np.array([[10.0, 0.0, 10.0], [0.0, 10.0, 6.0], [0.0, 0.0, 1.0]])
+    extrinsic = np.eye(4)  # the optical frame is the world's
+    depth = np.full((height, width), depth_value, dtype=np.float32)
+    span = np.arange(-3, 3, dtype=np.int32)
+    keys = np.stack(np.meshgrid(span, span, np.arange(0, 4, dtype=np.int32), indexing="ij"),
+                    -1).reshape(-1, 3)
+    ours = block_grid(voxel, res, 1000)
+    theirs = block_grid(voxel, res, 1000)
+    tensor = o3c.Tensor(np.ascontiguousarray(keys))
+    for _ in range(2):
+        open3d_fuse(theirs, tensor, depth, intrinsic, extrinsic, mult, depth_max)
+        fuse_depth(ours, tensor, depth, extrinsic,
+                   FusionParameters.of(intrinsic, voxel, mult, depth_max))
+    fused = _assert_same_grids(ours, theirs)
+    assert (fused > 0) == (depth_value <= depth_max)
