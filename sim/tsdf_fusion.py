@@ -67,7 +67,7 @@ def fuse_depth(grid: Any, block_coords: Any, depth: npt.NDArray[np.float32],
         extrinsic: (4, 4) optical-from-world transform.
     """
     table = grid.hashmap()
-    table.activate(block_coords)  # the table must have room: reallocating would move the arrays
+    table.activate(block_coords)  # may grow the table: its arrays are read after this
     slots, _ = table.find(block_coords)
     tsdf = grid.attribute("tsdf").numpy()  # (capacity, R, R, R, 1), without a copy
     shape = tsdf.shape[:4]

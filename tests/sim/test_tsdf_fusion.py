@@ -57,12 +57,12 @@ def _views(area_name: str, count: int, seed: int, camera_config: CameraConfig | 
 
 
 def _fuse_both(views: list[View], intrinsic: npt.NDArray[np.float64], config: TsdfConfig,
-               depth_max: float, extra_blocks: int = 0) -> int:
+               depth_max: float, extra_blocks: int = 0, capacity: int = 20000) -> int:
     """Fuse the views into two grids, Open3D's way and the compiled way, over Open3D's touched
     blocks (plus, with `extra_blocks`, a cube of blocks of that half-width around the camera,
     most of them behind it or outside the image); compare the grids after every frame."""
-    ours = block_grid(config.voxel_size_m, config.block_resolution, 20000)
-    theirs = block_grid(config.voxel_size_m, config.block_resolution, 20000)
+    ours = block_grid(config.voxel_size_m, config.block_resolution, capacity)
+    theirs = block_grid(config.voxel_size_m, config.block_resolution, capacity)
     params = FusionParameters.of(intrinsic, config.voxel_size_m, config.trunc_voxel_multiplier,
                                  depth_max)
     k = o3c.Tensor(np.asarray(intrinsic, dtype=np.float64))
@@ -95,6 +95,15 @@ def _fuse_both(views: list[View], intrinsic: npt.NDArray[np.float64], config: Ts
 def test_noisy_views_of_maze_fuse_as_open3d_fuses_them() -> None:
     camera, views = _views("maze", 24, seed=0)
     assert _fuse_both(views, camera.config.intrinsic_matrix(), TsdfConfig(), 5.0) > 50_000
+
+
+def test_a_full_block_table_grows_while_fusing() -> None:
+    """Blocks beyond the table's capacity: the table grows inside `fuse_depth`'s activation, and
+    the fusion writes into the grown table's arrays."""
+    camera, views = _views("maze", 6, seed=6)
+    # Over 60,000 fused voxels fill more than 100 blocks of 512.
+    assert _fuse_both(views, camera.config.intrinsic_matrix(), TsdfConfig(), 5.0,
+                      capacity=100) > 60_000
 
 
 def test_voxels_behind_the_camera_and_outside_the_image_are_left_alone() -> None:
