@@ -11,7 +11,7 @@ from sim.camera import CameraConfig, DepthCamera
 from sim.geometry import Pose
 from sim.open3d_any import o3c, o3d
 from sim.tsdf import TsdfConfig, TsdfVolume
-from sim.tsdf_blocks import block_grid
+from sim.tsdf_blocks import block_arrays, block_grid
 from sim.tsdf_fusion import FusionParameters, fuse_depth, open3d_fuse
 
 View = tuple[npt.NDArray[np.float32], Pose]
@@ -20,14 +20,10 @@ View = tuple[npt.NDArray[np.float32], Pose]
 def _contents(grid: object) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.uint32],
                                      npt.NDArray[np.float32]]:
     """The allocated blocks' keys, tsdf bits and weights, in key order (slots aside)."""
-    table = grid.hashmap()  # type: ignore[attr-defined]
-    slots = table.active_buf_indices().numpy().astype(np.int64)
-    keys = table.key_tensor().numpy()[slots]
-    order = np.lexsort(keys.T[::-1])
-    tsdf = grid.attribute("tsdf").numpy()  # type: ignore[attr-defined]
-    tsdf = tsdf.reshape(len(tsdf), -1)
-    weight = grid.attribute("weight").numpy().reshape(len(tsdf), -1)  # type: ignore[attr-defined]
-    return keys[order], tsdf[slots][order].view(np.uint32), weight[slots][order]
+    blocks = block_arrays(grid)
+    assert blocks is not None
+    return (blocks.keys[blocks.order], blocks.tsdf[blocks.order].view(np.uint32),
+            blocks.weight[blocks.order])
 
 
 def _assert_same_grids(a: object, b: object) -> int:
@@ -149,13 +145,15 @@ def test_the_volume_fuses_as_open3d_fuses() -> None:
     k = o3c.Tensor(camera.config.intrinsic_matrix())
     for depth, pose in views:
         volume.integrate(depth, pose)
-        image = o3d.t.geometry.Image(o3c.Tensor(np.nan_to_num(depth, nan=0.0)))
-        ext = o3c.Tensor(TsdfVolume.extrinsic(pose))
+        clean = np.nan_to_num(depth, nan=0.0)
+        extrinsic = TsdfVolume.extrinsic(pose)
         try:
-            coords = reference.compute_unique_block_coordinates(image, k, ext, 1.0, 5.0, 3.0)
+            coords = reference.compute_unique_block_coordinates(
+                o3d.t.geometry.Image(o3c.Tensor(clean)), k, o3c.Tensor(extrinsic), 1.0, 5.0, 3.0)
         except RuntimeError:  # no return within range: the volume fuses nothing either
             continue
-        reference.integrate(coords, image, k, ext, 1.0, 5.0, 3.0)
+        open3d_fuse(reference, coords, clean, camera.config.intrinsic_matrix(), extrinsic, 3.0,
+                    5.0)
     assert volume.grid.hashmap().capacity() > 100
     assert _assert_same_grids(volume.grid, reference) > 10_000
 
