@@ -145,10 +145,22 @@ def _find(parent: IndexArray, p: int) -> int:
     return root
 
 
+@numba.njit(cache=True, inline="always")
+def _union(parent: IndexArray, q: int, p: int) -> None:
+    """Join the sets of q and p; the root of the union is its smallest member."""
+    rq = _find(parent, q)
+    rp = _find(parent, p)
+    if rp != rq:
+        parent[max(rp, rq)] = min(rp, rq)
+
+
 @numba.njit(cache=True)
-def _adjacent_pairs(indices: IndexArray, ny: int, nz: int) -> npt.NDArray[np.int32]:
+def _pairs_and_components(indices: IndexArray, ny: int, nz: int
+                          ) -> tuple[npt.NDArray[np.int32], IndexArray, int]:
     """(M, 2) int32 every pair (q, p), q < p, of 26-neighbours among the voxels, by p then by
-    q's row.
+    q's row; and the 26-connected components they form: (K,) int64 labels numbered in C order
+    of each component's first voxel, and their number (`_joined` over the pairs with one key
+    for all, the components joined as the pairs are found rather than in a second pass).
 
     indices: (K, 3) int64 distinct voxels of a grid with `ny` x `nz` columns, in C order.
     """
@@ -156,6 +168,7 @@ def _adjacent_pairs(indices: IndexArray, ny: int, nz: int) -> npt.NDArray[np.int
     flat = np.empty(count, dtype=np.int64)
     for p in range(count):
         flat[p] = (indices[p, 0] * ny + indices[p, 1]) * nz + indices[p, 2]
+    parent = np.arange(count)
     # Each pair is found once, from its later voxel: only the 13 neighbours before p in C
     # order are looked for: (i, j, k - 1), which can only be p - 1, and four rows of three
     # (i - 1 with j - 1, j, j + 1; i with j - 1; each k - 1 .. k + 1). The voxels are sorted, so
@@ -172,6 +185,7 @@ def _adjacent_pairs(indices: IndexArray, ny: int, nz: int) -> npt.NDArray[np.int
             pairs[m, 0] = p - 1
             pairs[m, 1] = p
             m += 1
+            _union(parent, p - 1, p)
         for row in range(4):
             a = i + rows_i[row]
             b = j + rows_j[row]
@@ -188,25 +202,18 @@ def _adjacent_pairs(indices: IndexArray, ny: int, nz: int) -> npt.NDArray[np.int
                 pairs[m, 0] = q
                 pairs[m, 1] = p
                 m += 1
+                _union(parent, q, p)
                 q += 1
-    return pairs[:m]
+    labels, n = _numbered(parent)
+    return pairs[:m], labels, n
 
 
 @numba.njit(cache=True)
-def _joined(pairs: npt.NDArray[np.int32], key: IndexArray, count: int) -> tuple[IndexArray, int]:
-    """Components of `count` voxels joined by the `pairs` (M, 2) whose two voxels have equal
-    `key` (count,): (count,) int64 labels 0 .. n-1 numbered in C order of each component's
-    first voxel, and n."""
-    parent = np.arange(count)
-    for e in range(pairs.shape[0]):
-        q, p = pairs[e, 0], pairs[e, 1]
-        if key[q] != key[p]:
-            continue
-        rq = _find(parent, q)
-        rp = _find(parent, p)
-        if rp != rq:
-            parent[max(rp, rq)] = min(rp, rq)
-    # Each root is its component's smallest member, so numbering roots in order follows C order.
+def _numbered(parent: IndexArray) -> tuple[IndexArray, int]:
+    """(count,) int64 labels 0 .. n-1 of the sets of the union-find forest `parent`, numbered in
+    C order of each set's first voxel, and n."""
+    # Each root is its set's smallest member, so numbering roots in order follows C order.
+    count = parent.shape[0]
     labels = np.empty(count, dtype=np.int64)
     n = 0
     for p in range(count):
@@ -220,6 +227,19 @@ def _joined(pairs: npt.NDArray[np.int32], key: IndexArray, count: int) -> tuple[
 
 
 @numba.njit(cache=True)
+def _joined(pairs: npt.NDArray[np.int32], key: IndexArray, count: int) -> tuple[IndexArray, int]:
+    """Components of `count` voxels joined by the `pairs` (M, 2) whose two voxels have equal
+    `key` (count,): (count,) int64 labels 0 .. n-1 numbered in C order of each component's
+    first voxel, and n."""
+    parent = np.arange(count)
+    for e in range(pairs.shape[0]):
+        q, p = pairs[e, 0], pairs[e, 1]
+        if key[q] == key[p]:
+            _union(parent, q, p)
+    return _numbered(parent)
+
+
+@numba.njit(cache=True)
 def _label_boxes(indices: IndexArray, labels: IndexArray, n: int) -> tuple[IndexArray, IndexArray]:
     """(n, 3) min and (n, 3) max voxel index of each label; indices (K, 3), labels (K,)."""
     lo = np.full((n, 3), np.iinfo(np.int64).max)
@@ -230,6 +250,26 @@ def _label_boxes(indices: IndexArray, labels: IndexArray, n: int) -> tuple[Index
             lo[lab, a] = min(lo[lab, a], indices[p, a])
             hi[lab, a] = max(hi[lab, a], indices[p, a])
     return lo, hi
+
+
+@numba.njit(cache=True)
+def _grouped(indices: IndexArray, labels: IndexArray, sizes: IndexArray) -> IndexArray:
+    """(K, 3) the voxels `indices` (K, 3) ordered by label (K,) and in their given order within
+    a label (a stable sort, `indices[np.argsort(labels, kind="stable")]`), placed by counting:
+    label l's voxels start at the sum of `sizes` (n,) before it."""
+    start = np.empty(sizes.shape[0], dtype=np.int64)
+    total = 0
+    for lab in range(sizes.shape[0]):
+        start[lab] = total
+        total += sizes[lab]
+    out = np.empty_like(indices)
+    for p in range(indices.shape[0]):
+        q = start[labels[p]]
+        start[labels[p]] = q + 1
+        out[q, 0] = indices[p, 0]
+        out[q, 1] = indices[p, 1]
+        out[q, 2] = indices[p, 2]
+    return out
 
 
 # The position of a word's lowest set bit from that bit alone: a de Bruijn sequence's top six
@@ -368,9 +408,9 @@ class FrontierTracker:
             return []
         _, ny, nz = self._map.shape
         indices = _true_indices(self._bits, ny, nz, self._count)  # (F, 3), C order
-        # The neighbour pairs are found once; the components, then their cells, join along them.
-        pairs = _adjacent_pairs(indices, ny, nz)
-        components, n = _joined(pairs, np.zeros(len(indices), dtype=np.int64), len(indices))
+        # The neighbour pairs are found once, joining the components as they are; the cells
+        # then join along them.
+        pairs, components, n = _pairs_and_components(indices, ny, nz)
         keys = _cell_keys(indices, components, n, max_extent_m / self._map.voxel_size)
         labels, n = _joined(pairs, keys, len(indices))
 
@@ -383,8 +423,7 @@ class FrontierTracker:
         nonzero = norm > 1e-12
         normal[nonzero] = mean_dir[nonzero] / norm[nonzero, None]
 
-        order = np.argsort(labels, kind="stable")  # stable: C order inside each piece
-        grouped = indices[order]
+        grouped = _grouped(indices, labels, sizes)  # C order inside each piece
         grouped.setflags(write=False)
         ends = np.cumsum(sizes)
         result: list[FrontierCluster] = []

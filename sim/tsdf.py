@@ -12,9 +12,9 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from sim.camera import BODY_FROM_OPTICAL
 from sim.geometry import FloatArray, Pose, yaw_matrix
-from sim.open3d_any import o3c, o3d
+from sim.open3d_any import o3c
 from sim.tsdf_blocks import block_grid
-from sim.tsdf_fusion import FusionParameters, fuse_depth
+from sim.tsdf_fusion import FusionParameters, fuse_depth, touched_blocks
 from sim.tsdf_mesh import MAX_RESOLUTION, marching_cubes
 from sim.tsdf_points import crossing_points
 from sim.tsdf_sampling import trilinear
@@ -75,7 +75,6 @@ class TsdfVolume:
         table starts with room for them. Which slot holds a block changes nothing a run
         computes (see `_make_room`)."""
         self.config = config
-        self._intrinsic = o3c.Tensor(np.asarray(intrinsic, dtype=np.float64))
         self._max_range = float(max_range_m)
         self._fusion = FusionParameters.of(intrinsic, config.voxel_size_m,
                                            config.trunc_voxel_multiplier, max_range_m)
@@ -106,20 +105,14 @@ class TsdfVolume:
         if not within:
             return  # nothing within range: Open3D would raise "no block is touched"
         clean = clean.reshape(depth.shape)
-        image = o3d.t.geometry.Image(o3c.Tensor(clean))
         extrinsic = self.extrinsic(pose)
-        try:
-            blocks = self._grid.compute_unique_block_coordinates(
-                image, self._intrinsic, o3c.Tensor(extrinsic), 1.0, self._max_range,
-                self.config.trunc_voxel_multiplier
-            )
-        except RuntimeError as exc:
-            if "block" not in str(exc).lower():
-                raise
+        # Open3D's block coordinates and `integrate` values to the bit, compiled
+        # (`sim.tsdf_fusion`).
+        blocks = touched_blocks(clean, extrinsic, self._fusion, self.config.block_resolution)
+        if len(blocks) == 0:
             return  # a frame whose returns touch no voxel block: nothing to fuse
         self._make_room(len(blocks))
-        # Open3D's `integrate` values to the bit, compiled (`sim.tsdf_fusion`).
-        fuse_depth(self._grid, blocks, clean, extrinsic, self._fusion)
+        fuse_depth(self._grid, o3c.Tensor(blocks), clean, extrinsic, self._fusion)
         self.frames += 1
 
     def _make_room(self, touched: int) -> None:

@@ -16,10 +16,21 @@ that. The rules kept from Open3D's kernel, all in float32:
 
 Each voxel's update reads only its own values, so the order of the blocks changes nothing.
 `open3d_fuse` is Open3D's own call, kept as the reference the tests and benchmarks compare with.
+
+The blocks a frame touches are Open3D's `compute_unique_block_coordinates` (`DepthTouchCPU`,
+v0.19-v0.20), compiled as `touched_blocks`: every fourth row and column of the image, a pixel
+kept when its depth d is in (0, depth_max) (open at both ends here), the camera pose the
+extrinsic's inverse in float64 (`R'` = `R.T`, `t' = -(R' t)` summed in order) rounded to
+float32, the pixel's ray `(u - cx) * 1 / fx` (v alike) at unit depth taken to the world as
+`((x*p00 + y*p01) + 1*p02) + p03` less the camera position, and four samples along it from
+`max(d - trunc, 0)` to `min(d + trunc, depth_max)` in steps of a third of that span, each in
+the block `floor((o + t * dir) / block_size)`; all float32. A set: Open3D lists it in its hash
+set's order, `touched_blocks` in the order the samples first meet each block.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -75,6 +86,41 @@ def fuse_depth(grid: Any, block_coords: Any, depth: npt.NDArray[np.float32],
           grid.attribute("weight").numpy().reshape(shape), np.ascontiguousarray(depth),
           np.ascontiguousarray(extrinsic[:3], dtype=np.float32), params.intrinsic,
           params.voxel_size, params.trunc, params.depth_max)
+
+
+def touched_blocks(depth: npt.NDArray[np.float32], extrinsic: npt.NDArray[np.float64],
+                   params: FusionParameters, resolution: int) -> npt.NDArray[np.int32]:
+    """(N, 3) int32 keys of the blocks of `resolution`³ voxels the frame touches, each once, in
+    the order the image's samples meet them: the set Open3D's
+    `compute_unique_block_coordinates` gives (module docstring).
+
+    Args:
+        depth: (H, W) float32 z-depth in metres, 0 where there is no return (no NaN).
+        extrinsic: (4, 4) float64 optical-from-world transform.
+    """
+    block_size = np.float32(params.voxel_size * np.float32(resolution))
+    return _touched_blocks(np.ascontiguousarray(depth), np.ascontiguousarray(extrinsic,
+                           dtype=np.float64), params.intrinsic, block_size, params.trunc,
+                           params.depth_max, _DEPTH_STRIDE)
+
+
+def open3d_blocks(grid: Any, depth: npt.NDArray[np.float32], intrinsic: npt.ArrayLike,
+                  extrinsic: npt.NDArray[np.float64], trunc_multiplier: float,
+                  depth_max: float) -> npt.NDArray[np.int32]:
+    """The same blocks by Open3D's `compute_unique_block_coordinates` (the reference), as
+    (N, 3) int32 in Open3D's order; (0, 3) where Open3D finds none."""
+    image = o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(depth, dtype=np.float32)))
+    try:
+        blocks = grid.compute_unique_block_coordinates(
+            image, o3c.Tensor(np.asarray(intrinsic, dtype=np.float64)),
+            o3c.Tensor(np.asarray(extrinsic, dtype=np.float64)), 1.0, depth_max,
+            trunc_multiplier)
+    except RuntimeError as exc:
+        if "block" not in str(exc).lower():
+            raise
+        return np.zeros((0, 3), dtype=np.int32)
+    keys: npt.NDArray[np.int32] = blocks.numpy()
+    return keys
 
 
 def open3d_fuse(grid: Any, block_coords: Any, depth: npt.NDArray[np.float32],
@@ -146,3 +192,94 @@ def _fuse(slots: npt.NDArray[np.int64], keys: npt.NDArray[np.int32],
                     inv_sum = one / (w + one)
                     block_tsdf[k, j, i] = (w * block_tsdf[k, j, i] + sdf) * inv_sum
                     block_weight[k, j, i] = w + one
+
+
+# Open3D samples every fourth row and column of the image for the blocks it touches
+# (`VoxelBlockGrid::GetUniqueBlockCoordinates`, `down_factor`).
+_DEPTH_STRIDE = 4
+# Samples per pixel less one (`DepthTouchCPU`'s `step_size`).
+_STEPS = 3
+# A block key's axes packed in one int64: 21 bits each, offset by half their range.
+_KEY_BITS = 21
+_KEY_HALF = 1 << (_KEY_BITS - 1)
+# Fibonacci hashing's multiplier, 2^64 / the golden ratio: the set's slot is the product's top
+# bits.
+_GOLDEN = 0x9E3779B97F4A7C15
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _touched_blocks(depth: npt.NDArray[np.float32], extrinsic: npt.NDArray[np.float64],
+                    intrinsic: npt.NDArray[np.float32], block_size: np.float32,
+                    trunc: np.float32, depth_max: np.float32,
+                    stride: int) -> npt.NDArray[np.int32]:  # pragma: no cover - numba
+    """`touched_blocks`' keys in the order first met; every operation in Open3D's precision and
+    order."""
+    # The pose, Open3D's `InverseTransformation` in float64, then rounded as its indexer keeps it.
+    pose = np.empty((3, 4), dtype=np.float32)
+    for r in range(3):
+        pose[r, 0] = np.float32(extrinsic[0, r])
+        pose[r, 1] = np.float32(extrinsic[1, r])
+        pose[r, 2] = np.float32(extrinsic[2, r])
+        pose[r, 3] = np.float32(-(extrinsic[0, r] * extrinsic[0, 3]
+                                  + extrinsic[1, r] * extrinsic[1, 3]
+                                  + extrinsic[2, r] * extrinsic[2, 3]))
+    fx, fy, cx, cy = intrinsic[0], intrinsic[1], intrinsic[2], intrinsic[3]
+    one = np.float32(1.0)
+    zero = np.float32(0.0)
+    third = np.float32(_STEPS)
+    ox, oy, oz = pose[0, 3], pose[1, 3], pose[2, 3]
+    rows = depth.shape[0] // stride
+    cols = depth.shape[1] // stride
+    packed = np.empty(rows * cols * (_STEPS + 1), dtype=np.int64)
+    m = 0
+    for row in range(rows):
+        y = row * stride
+        for col in range(cols):
+            x = col * stride
+            d = depth[y, x]
+            if not (d > zero and d < depth_max):
+                continue
+            xc = (np.float32(x) - cx) * one / fx
+            yc = (np.float32(y) - cy) * one / fy
+            # The point at unit depth in the world, then the ray from the camera through it.
+            gx = xc * pose[0, 0] + yc * pose[0, 1] + one * pose[0, 2] + ox
+            gy = xc * pose[1, 0] + yc * pose[1, 1] + one * pose[1, 2] + oy
+            gz = xc * pose[2, 0] + yc * pose[2, 1] + one * pose[2, 2] + oz
+            dx = gx - ox
+            dy = gy - oy
+            dz = gz - oz
+            t_min = max(d - trunc, zero)
+            t_max = min(d + trunc, depth_max)
+            t_step = (t_max - t_min) / third
+            t = t_min
+            for _ in range(_STEPS + 1):
+                bx = np.int64(math.floor((ox + t * dx) / block_size))
+                by = np.int64(math.floor((oy + t * dy) / block_size))
+                bz = np.int64(math.floor((oz + t * dz) / block_size))
+                packed[m] = (((bx + _KEY_HALF) << (2 * _KEY_BITS))
+                             | ((by + _KEY_HALF) << _KEY_BITS) | (bz + _KEY_HALF))
+                m += 1
+                t += t_step
+    # Each key once, in the order first met: an open-addressing set over the packed keys.
+    bits = 1
+    while (1 << bits) < 2 * m:
+        bits += 1
+    table = np.full(1 << bits, -1, dtype=np.int64)
+    out = np.empty((m, 3), dtype=np.int32)
+    n = 0
+    mask = (1 << _KEY_BITS) - 1
+    for e in range(m):
+        key = packed[e]
+        if e > 0 and key == packed[e - 1]:
+            continue  # the same block as the previous sample (most are)
+        h = np.int64((np.uint64(key) * np.uint64(_GOLDEN)) >> np.uint64(64 - bits))
+        while table[h] != -1 and table[h] != key:
+            h = (h + 1) & ((1 << bits) - 1)
+        if table[h] == key:
+            continue
+        table[h] = key
+        out[n, 0] = np.int32(((key >> (2 * _KEY_BITS)) & mask) - _KEY_HALF)
+        out[n, 1] = np.int32(((key >> _KEY_BITS) & mask) - _KEY_HALF)
+        out[n, 2] = np.int32((key & mask) - _KEY_HALF)
+        n += 1
+    return out[:n]

@@ -203,13 +203,15 @@ def test_trackers_share_the_map_at_their_own_pace() -> None:
 
 
 def test_components_are_scipys_26_connected_labels_numbered_in_c_order() -> None:
-    """`_joined` over `_adjacent_pairs` joins 26-neighbours with equal keys (pairs found from
-    the 13 neighbours before each voxel): the components of scipy's labelling of each key's
-    voxels, numbered by their first voxel in C order, in grids with voxels on every face (where
-    a neighbour's flat index wraps into the next row or plane)."""
+    """`_joined` over the pairs of `_pairs_and_components` joins 26-neighbours with equal keys
+    (pairs found from the 13 neighbours before each voxel): the components of scipy's labelling
+    of each key's voxels, numbered by their first voxel in C order, in grids with voxels on
+    every face (where a neighbour's flat index wraps into the next row or plane). The
+    components `_pairs_and_components` joins as it finds the pairs are `_joined`'s with one key
+    for all."""
     from scipy import ndimage
 
-    from sim.frontiers import _adjacent_pairs, _joined
+    from sim.frontiers import _joined, _pairs_and_components
 
     rng = np.random.default_rng(0)
     shapes = [(30, 25, 12), (1, 9, 7), (8, 1, 6), (7, 9, 1), (2, 2, 2), (12, 3, 40)]
@@ -219,7 +221,11 @@ def test_components_are_scipys_26_connected_labels_numbered_in_c_order() -> None
         indices = np.argwhere(mask).astype(np.int64)
         keys = (rng.integers(0, 3, len(indices)) if trial % 2
                 else np.zeros(len(indices))).astype(np.int64)
-        labels, n = _joined(_adjacent_pairs(indices, shape[1], shape[2]), keys, len(indices))
+        pairs, components, count = _pairs_and_components(indices, shape[1], shape[2])
+        one_key = _joined(pairs, np.zeros(len(indices), dtype=np.int64), len(indices))
+        np.testing.assert_array_equal(components, one_key[0])
+        assert count == one_key[1]
+        labels, n = _joined(pairs, keys, len(indices))
         component = np.empty(len(indices), dtype=np.int64)
         offset = 0
         for value in np.unique(keys):
@@ -233,6 +239,21 @@ def test_components_are_scipys_26_connected_labels_numbered_in_c_order() -> None
         expected = np.argsort(np.argsort(first))[inverse]
         np.testing.assert_array_equal(labels, expected)
         assert n == len(first)
+
+
+def test_grouped_is_a_stable_sort_by_label() -> None:
+    """`_grouped` places the voxels by counting: NumPy's stable argsort by label, with labels
+    of no voxel, one label for all and one voxel per label."""
+    from sim.frontiers import _grouped
+
+    rng = np.random.default_rng(7)
+    for count, n in ((0, 3), (1, 1), (500, 1), (500, 40), (2_000, 700), (300, 300)):
+        indices = rng.integers(0, 50, size=(count, 3)).astype(np.int64)
+        labels = (rng.permutation(count) % n if count == n
+                  else rng.integers(0, n, size=count)).astype(np.int64)
+        sizes = np.bincount(labels, minlength=n)
+        np.testing.assert_array_equal(_grouped(indices, labels, sizes),
+                                      indices[np.argsort(labels, kind="stable")])
 
 
 def test_cell_keys_cut_each_component_box_into_equal_cells() -> None:

@@ -1,4 +1,5 @@
-"""The compiled fusion of a depth frame: Open3D's `VoxelBlockGrid.integrate` values, to the bit."""
+"""The compiled fusion of a depth frame: Open3D's `VoxelBlockGrid.integrate` values, to the bit,
+over the blocks Open3D's `compute_unique_block_coordinates` gives, the same set."""
 
 from __future__ import annotations
 
@@ -9,10 +10,16 @@ import pytest
 from areas import load_area
 from sim.camera import CameraConfig, DepthCamera
 from sim.geometry import Pose
-from sim.open3d_any import o3c, o3d
+from sim.open3d_any import o3c
 from sim.tsdf import TsdfConfig, TsdfVolume
 from sim.tsdf_blocks import block_arrays, block_grid
-from sim.tsdf_fusion import FusionParameters, fuse_depth, open3d_fuse
+from sim.tsdf_fusion import (
+    FusionParameters,
+    fuse_depth,
+    open3d_blocks,
+    open3d_fuse,
+    touched_blocks,
+)
 
 View = tuple[npt.NDArray[np.float32], Pose]
 
@@ -33,6 +40,21 @@ def _assert_same_grids(a: object, b: object) -> int:
     assert np.array_equal(weight_a, weight_b)
     assert np.array_equal(tsdf_a, tsdf_b)
     return int((weight_a > 0).sum())
+
+
+def _assert_same_blocks(grid: object, depth: npt.NDArray[np.float32],
+                        intrinsic: npt.NDArray[np.float64], extrinsic: npt.NDArray[np.float64],
+                        config: TsdfConfig, depth_max: float) -> npt.NDArray[np.int32]:
+    """`touched_blocks` against Open3D's on one frame: the same set (Open3D's keys returned)."""
+    theirs = open3d_blocks(grid, depth, intrinsic, extrinsic, config.trunc_voxel_multiplier,
+                           depth_max)
+    params = FusionParameters.of(intrinsic, config.voxel_size_m, config.trunc_voxel_multiplier,
+                                 depth_max)
+    ours = touched_blocks(depth, extrinsic, params, config.block_resolution)
+    assert ours.dtype == np.int32 and ours.shape[1:] == (3,)
+    np.testing.assert_array_equal(np.unique(ours, axis=0), np.unique(theirs, axis=0))
+    assert len(ours) == len(theirs)  # each block once
+    return theirs
 
 
 def _views(area_name: str, count: int, seed: int, camera_config: CameraConfig | None = None,
@@ -56,23 +78,19 @@ def _fuse_both(views: list[View], intrinsic: npt.NDArray[np.float64], config: Ts
                depth_max: float, extra_blocks: int = 0, capacity: int = 20000) -> int:
     """Fuse the views into two grids, Open3D's way and the compiled way, over Open3D's touched
     blocks (plus, with `extra_blocks`, a cube of blocks of that half-width around the camera,
-    most of them behind it or outside the image); compare the grids after every frame."""
+    most of them behind it or outside the image); compare the grids after every frame, and
+    the touched blocks with `touched_blocks`'."""
     ours = block_grid(config.voxel_size_m, config.block_resolution, capacity)
     theirs = block_grid(config.voxel_size_m, config.block_resolution, capacity)
     params = FusionParameters.of(intrinsic, config.voxel_size_m, config.trunc_voxel_multiplier,
                                  depth_max)
-    k = o3c.Tensor(np.asarray(intrinsic, dtype=np.float64))
     block = config.voxel_size_m * config.block_resolution
     fused = 0
     for depth, pose in views:
         clean = np.nan_to_num(depth, nan=0.0).astype(np.float32)
         extrinsic = TsdfVolume.extrinsic(pose)
-        try:
-            coords = theirs.compute_unique_block_coordinates(
-                o3d.t.geometry.Image(o3c.Tensor(clean)), k, o3c.Tensor(extrinsic), 1.0,
-                depth_max, config.trunc_voxel_multiplier).numpy()
-        except RuntimeError:  # no return within range (a pose facing a wall's back)
-            coords = np.zeros((0, 3), dtype=np.int32)
+        # Empty when no return is within range (a pose facing a wall's back).
+        coords = _assert_same_blocks(theirs, clean, intrinsic, extrinsic, config, depth_max)
         if extra_blocks:
             centre = np.floor(pose.position / block).astype(np.int32)
             span = np.arange(-extra_blocks, extra_blocks + 1, dtype=np.int32)
@@ -136,24 +154,21 @@ def test_returns_at_and_beyond_the_range_and_missing_ones() -> None:
 
 
 def test_the_volume_fuses_as_open3d_fuses() -> None:
-    """`TsdfVolume.integrate` (NaN cleaning, the table's growth, the compiled fusion) against
-    Open3D's two calls on the same frames."""
+    """`TsdfVolume.integrate` (NaN cleaning, the compiled block coordinates, the table's growth,
+    the compiled fusion) against Open3D's two calls on the same frames."""
     camera, views = _views("maze", 10, seed=5)
     config = TsdfConfig(initial_block_count=100)  # grows the table mid-way
     volume = TsdfVolume(camera.config.intrinsic_matrix(), 5.0, config)
     reference = block_grid(config.voxel_size_m, config.block_resolution, 100)
-    k = o3c.Tensor(camera.config.intrinsic_matrix())
+    k = camera.config.intrinsic_matrix()
     for depth, pose in views:
         volume.integrate(depth, pose)
         clean = np.nan_to_num(depth, nan=0.0)
         extrinsic = TsdfVolume.extrinsic(pose)
-        try:
-            coords = reference.compute_unique_block_coordinates(
-                o3d.t.geometry.Image(o3c.Tensor(clean)), k, o3c.Tensor(extrinsic), 1.0, 5.0, 3.0)
-        except RuntimeError:  # no return within range: the volume fuses nothing either
+        coords = open3d_blocks(reference, clean, k, extrinsic, 3.0, 5.0)
+        if len(coords) == 0:  # no return within range: the volume fuses nothing either
             continue
-        open3d_fuse(reference, coords, clean, camera.config.intrinsic_matrix(), extrinsic, 3.0,
-                    5.0)
+        open3d_fuse(reference, o3c.Tensor(coords), clean, k, extrinsic, 3.0, 5.0)
     assert volume.grid.hashmap().capacity() > 100
     assert _assert_same_grids(volume.grid, reference) > 10_000
 
@@ -182,3 +197,38 @@ def test_exact_boundaries_fuse_as_open3d_fuses_them(depth_value: float) -> None:
                    FusionParameters.of(intrinsic, voxel, mult, depth_max))
     fused = _assert_same_grids(ours, theirs)
     assert (fused > 0) == (depth_value <= depth_max)
+
+
+@pytest.mark.parametrize(("width", "height"), [(98, 75), (161, 123), (4, 4), (3, 9)])
+def test_image_sizes_touch_the_blocks_open3d_touches(width: int, height: int) -> None:
+    """Images whose sides are not multiples of Open3D's stride of 4 (its last, partial row and
+    column of samples are dropped), and one smaller than a stride: the same blocks."""
+    camera, views = _views("offices-a", 6, seed=8,
+                           camera_config=CameraConfig(width=width, height=height))
+    config = TsdfConfig()
+    grid = block_grid(config.voxel_size_m, config.block_resolution, 1000)
+    for depth, pose in views:
+        _assert_same_blocks(grid, np.nan_to_num(depth, nan=0.0), camera.config.intrinsic_matrix(),
+                            TsdfVolume.extrinsic(pose), config, 5.0)
+
+
+@pytest.mark.parametrize("depth_value", [0.0, 0.5, 1.0, 1.75, 2.25, 3.0, 3.25])
+def test_exact_block_boundaries_touch_the_blocks_open3d_touches(depth_value: float) -> None:
+    """Binary-exact numbers so that the samples along each ray land exactly on block faces
+    (blocks of 0.25 m, truncation 0.25 m, samples every sixth of a metre from depth - 0.25):
+    depths of exactly 0 and exactly the maximum (3.0, left out: the comparison is open there),
+    a camera moved by whole and half blocks, turned a quarter."""
+    voxel, res, mult, depth_max = 0.0625, 4, 4.0, 3.0
+    width, height = 16, 12
+    intrinsic = np.array([[8.0, 0.0, 8.0], [0.0, 8.0, 6.0], [0.0, 0.0, 1.0]])
+    config = TsdfConfig(voxel_size_m=voxel, block_resolution=res, trunc_voxel_multiplier=mult)
+    grid = block_grid(voxel, res, 1000)
+    depth = np.full((height, width), depth_value, dtype=np.float32)
+    for shift, quarter in (((0.0, 0.0, 0.0), False), ((0.5, -0.25, 0.125), False),
+                           ((-1.0, 0.75, 0.25), True)):
+        extrinsic = np.eye(4)
+        if quarter:
+            extrinsic[:3, :3] = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+        extrinsic[:3, 3] = shift
+        touched = _assert_same_blocks(grid, depth, intrinsic, extrinsic, config, depth_max)
+        assert (len(touched) > 0) == (0.0 < depth_value < depth_max)
