@@ -12,10 +12,10 @@ the same inputs, alternating, `--repeats` times (the fastest pass of each is kep
 - occupancy: back-projection and `OccupancyMap.integrate` into a map replayed from empty,
   against a bare 3D-DDA that walks the same rays through the same grid and only counts the
   voxels it visits: voxel visits per second.
-- TSDF: `TsdfVolume.integrate` (Open3D's block coordinates, then the compiled fusion of
+- TSDF: `TsdfVolume.integrate` (the compiled block coordinates and fusion of
   `sim.tsdf_fusion`) against Open3D's own two calls (block coordinates, then integrate) on a
   second volume, the values being the same to the bit: the stage is below 1 where the
-  compiled fusion gains; voxel-block updates per second of Open3D's calls.
+  compiled code gains; voxel-block updates per second of Open3D's calls.
 - physics: `World.step` tracking a hover reference, against `pybullet.stepSimulation` alone on
   the same scene: steps per second.
 

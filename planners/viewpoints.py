@@ -172,9 +172,10 @@ def _candidate_pairs(
                 dy = (target_c[t, 1] - eye[1]) * voxel_size
                 dz = (target_c[t, 2] - eye[2]) * voxel_size
                 flat = dx * dx + dy * dy
-                if np.arctan2(abs(dz), np.sqrt(flat)) > max_elevation_rad:
-                    continue
+                # Both tests must pass; the cheaper first.
                 if np.sqrt(flat + dz * dz) > max_range_m:
+                    continue
+                if np.arctan2(abs(dz), np.sqrt(flat)) > max_elevation_rad:
                     continue
                 out_t[n] = t
                 out_eye[n, 0], out_eye[n, 1], out_eye[n, 2] = i, j, k
@@ -198,8 +199,11 @@ def _sampled(clusters: list[FrontierCluster], samples: int,
         voxels, owner = voxels[keep], owner[keep]
     if len(owner) == 0:
         return none
-    # `owner` is sorted: each remaining cluster's first row and size.
-    kept, first, counts = np.unique(owner, return_index=True, return_counts=True)
+    # `owner` is sorted: each remaining cluster's first row and size (`np.unique`'s answer,
+    # without its sort).
+    first = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])
+    kept = owner[first]
+    counts = np.diff(np.r_[first, len(owner)])
     # np.linspace(0, n - 1, samples) is i * ((n - 1) / (samples - 1)), the last exactly n - 1.
     if samples > 1:
         step = (counts - 1).astype(np.float64) / float(samples - 1)
