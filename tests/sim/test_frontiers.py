@@ -9,7 +9,8 @@ import numpy.typing as npt
 import pytest
 
 from sim.clearance import TraversabilityTracker
-from sim.frontiers import FrontierTracker
+from sim.frontier_pieces import touched_components
+from sim.frontiers import FrontierCluster, FrontierTracker
 from sim.occupancy import OccupancyMap, VoxelState
 
 BoolGrid = npt.NDArray[np.bool_]
@@ -155,6 +156,66 @@ def test_small_clusters_are_dropped_and_order_is_deterministic() -> None:
     assert np.all(tracker.frontier[tuple(covered.T)])
 
 
+def _assert_same_clusters(got: list[FrontierCluster], expected: list[FrontierCluster]) -> None:
+    assert len(got) == len(expected)
+    for a, b in zip(got, expected, strict=True):
+        assert a.id == b.id and a.size == b.size
+        np.testing.assert_array_equal(a.indices, b.indices)
+        # Bit for bit: the same sums over the same voxels in the same order.
+        assert a.centroid.tobytes() == b.centroid.tobytes()
+        assert a.normal.tobytes() == b.normal.tobytes()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_clusters_kept_between_calls_are_those_made_from_scratch(seed: int) -> None:
+    """The pieces a tracker keeps from call to call, made again only for the components the
+    map's changes touched, give the clusters of a fresh tracker on the same map, to the bit:
+    through small and large changes, calls with nothing changed, changes seen by `update`
+    calls between the clusters calls, other sizes and another cut (which makes them anew)."""
+    rng = np.random.default_rng(seed)
+    m = OccupancyMap((0.2, -0.4, 0.0), (60, 48, 14), 0.1)
+    tracker = FrontierTracker(m)
+    assert tracker.clusters() == []
+    reused = 0
+    for step in range(40):
+        # Mostly small batches far apart (most components untouched), now and then a large one.
+        rays = int(rng.integers(400, 900)) if step % 9 == 4 else int(rng.integers(1, 60))
+        integrate_random(m, rng, rays, hit_share=float(rng.uniform(0.0, 0.5)))
+        if step % 5 == 2:
+            tracker.update()  # the change is recomputed before the clusters are asked for
+            integrate_random(m, rng, int(rng.integers(1, 30)))
+        before = tracker._pieces
+        cut = 0.9 if step % 13 == 12 else 0.6
+        min_size = (1, 3, 5)[step % 3]
+        got = tracker.clusters(min_size=min_size, max_extent_m=cut)
+        if before is not None and before.cell_voxels == tracker._pieces.cell_voxels:
+            reused += 1
+        _assert_same_clusters(got, FrontierTracker(m).clusters(min_size, cut))
+        if step % 7 == 3:  # nothing changed since
+            _assert_same_clusters(tracker.clusters(min_size, cut), got)
+    assert reused > 20
+
+
+def test_a_component_is_touched_by_a_region_within_one_voxel_of_its_box() -> None:
+    """`touched_components`: a region meeting a component's box grown by one voxel touches it
+    (a voxel there may join it), one farther does not; the region is half-open."""
+    from sim.frontier_pieces import pieces_of
+    from sim.occupancy import IndexBox
+
+    m = half_free_map(free_voxels=3, shape=(12, 12, 12))  # one component: the plane x = 2
+    indices = np.argwhere(reference_frontier(m.state)).astype(np.int64)
+    pieces = pieces_of(indices, m.shape, m.state, m.origin, m.voxel_size, 100.0)
+    assert pieces.comp_lo.tolist() == [[2, 0, 0]] and pieces.comp_hi.tolist() == [[2, 11, 11]]
+    for lo, hi, touched in (((3, 0, 0), (4, 1, 1), True),    # beside the plane
+                            ((4, 0, 0), (5, 1, 1), False),   # two voxels off
+                            ((1, 11, 11), (2, 12, 12), True),  # beside it, below
+                            ((0, 0, 0), (1, 12, 12), False),  # two voxels below
+                            ((5, 5, 5), (5, 9, 9), False)):  # empty
+        region = IndexBox(lo, hi)
+        got = bool(touched_components(pieces, region)[0]) if region.size else False
+        assert got == touched, (lo, hi)
+
+
 def test_free_voxel_next_to_unknown_is_not_traversable() -> None:
     m = half_free_map()
     trav = TraversabilityTracker(m, radius_m=0.25).traversable
@@ -211,7 +272,7 @@ def test_components_are_scipys_26_connected_labels_numbered_in_c_order() -> None
     for all."""
     from scipy import ndimage
 
-    from sim.frontiers import _joined, _pairs_and_components
+    from sim.frontier_pieces import _joined, _pairs_and_components
 
     rng = np.random.default_rng(0)
     shapes = [(30, 25, 12), (1, 9, 7), (8, 1, 6), (7, 9, 1), (2, 2, 2), (12, 3, 40)]
@@ -244,7 +305,7 @@ def test_components_are_scipys_26_connected_labels_numbered_in_c_order() -> None
 def test_grouped_is_a_stable_sort_by_label() -> None:
     """`_grouped` places the voxels by counting: NumPy's stable argsort by label, with labels
     of no voxel, one label for all and one voxel per label."""
-    from sim.frontiers import _grouped
+    from sim.frontier_pieces import _grouped
 
     rng = np.random.default_rng(7)
     for count, n in ((0, 3), (1, 1), (500, 1), (500, 40), (2_000, 700), (300, 300)):
@@ -259,12 +320,12 @@ def test_grouped_is_a_stable_sort_by_label() -> None:
 def test_cell_keys_cut_each_component_box_into_equal_cells() -> None:
     """`_cell_keys` gives each voxel its component's cell: the box cut into the fewest equal
     cells at most `cell_voxels` wide, keys distinct across components."""
-    from sim.frontiers import _cell_keys
+    from sim.frontier_pieces import _cell_keys, _label_boxes
 
     rng = np.random.default_rng(4)
     indices = rng.integers(0, 60, size=(5_000, 3)).astype(np.int64)
     labels = rng.integers(0, 7, size=5_000).astype(np.int64)
-    keys = _cell_keys(indices, labels, 7, 12.5)
+    keys = _cell_keys(indices, labels, *_label_boxes(indices, labels, 7), 12.5)
     for label in range(7):
         mine = labels == label
         lo, hi = indices[mine].min(axis=0), indices[mine].max(axis=0)
