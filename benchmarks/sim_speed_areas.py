@@ -8,6 +8,10 @@ window weighs the run's one-time costs (building the physics scene, the start's 
 the final mesh and its scoring) more than a whole run does, and a whole run plans over a larger
 map later on.
 
+Each row carries the run's fingerprint (`tests/sim/episode_fingerprints.py`: its result less
+what measures the machine): with the `exact` preset, which charges no planning time, two trees
+that compute the same flight print the same fingerprint, so their times compare one flight.
+
 The title names the machine's speed factor (`sim.reference_speed`: the reference workload's
 time on the reference machine over its time here), so that tables measured on machines of
 different speed can be told apart; the stages do not all scale with it.
@@ -35,6 +39,7 @@ from planners.registry import make, spec
 from sim.config import preset
 from sim.episode import run_episode
 from sim.reference_speed import REFERENCE_CPU_S, speed_factor
+from tests.sim.episode_fingerprints import fingerprint
 
 STAGES = ("render", "occupancy", "tsdf", "physics", "metrics", "checks", "recording")
 
@@ -63,6 +68,7 @@ def measure(area_name: str, planner: str, preset_name: str, seconds: float | Non
         "planning_s": planning_s, "other_s": max(wall - accounted, 0.0),
         "grid_voxels": int(area.grid_shape[0] * area.grid_shape[1] * area.grid_shape[2]),
         "faces": len(area.triangles),
+        "fingerprint": fingerprint(result.to_json())[:12],
     }
 
 
@@ -93,11 +99,12 @@ def main() -> None:
         f"machine speed factor {factor:.2f} (reference workload {REFERENCE_CPU_S / factor:.3f} s "
         f"against {REFERENCE_CPU_S:.3f})",
         ["area", "faces", "grid voxels", "sim s", "sim s / wall s",
-         *(f"{k} ms/frame" for k in STAGES), "planning s", "other s", "wall s"],
+         *(f"{k} ms/frame" for k in STAGES), "planning s", "other s", "wall s", "fingerprint"],
         [[r["area"], r["faces"], r["grid_voxels"], f"{r['simulated_s']:.0f}",
           f"{r['realtime_factor']:.1f}",
           *(f"{r['frame_costs_ms'].get(k, 0.0):.2f}" for k in STAGES),
-          f"{r['planning_s']:.1f}", f"{r['other_s']:.1f}", f"{r['wall_s']:.1f}"] for r in rows],
+          f"{r['planning_s']:.1f}", f"{r['other_s']:.1f}", f"{r['wall_s']:.1f}",
+          r["fingerprint"]] for r in rows],
     )
     path = write_json(args.out, {
         "command": "python benchmarks/sim_speed_areas.py " + " ".join(sys.argv[1:]),
