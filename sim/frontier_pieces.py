@@ -35,7 +35,9 @@ class Pieces:
     Attributes:
         cell_voxels: the widest a piece may be, in voxels (the cut they were made with).
         comp_lo, comp_hi: (C, 3) int64 inclusive voxel box of each component.
-        voxel_flat: (F,) int64 flat C-order index of each voxel; voxel_comp: (F,) its component.
+        voxel_flat: (F,) int64 flat C-order index of each voxel; voxel_comp: (F,) its component
+            (after `merged`, components and voxels are in no particular order; nothing reads
+            them in order).
         grouped: (F, 3) int64 the voxels, piece after piece, each piece in C order.
         start, size: (P,) int64 each piece's rows in `grouped`; pieces in C order of their
             first voxel.

@@ -37,7 +37,8 @@ class FrontierCluster:
 
     Attributes:
         id: position in the list `FrontierTracker.clusters` returned; not stable across calls.
-        indices: (K, 3) int64 voxel indices, in C order.
+        indices: (K, 3) int64 voxel indices, in C order; read-only (the tracker keeps them for
+            its next call).
         centroid: (3,) float64 mean of the voxel centres, world metres.
         normal: (3,) float64 unit vector, the normalised mean over the voxels of the unit
             direction toward their UNKNOWN 6-neighbours: it points from known free space into
@@ -101,7 +102,7 @@ def _true_indices(bits: BitGrid, ny: int, nz: int, count: int) -> IndexArray:
     """(count, 3) int64 indices of the voxels whose bit is set in `bits` (one bit per voxel of
     a (.., ny, nz) grid, as `_frontier_box` keeps them), in C order; count is their number.
 
-    Frontier voxels are a small share of the grid, and this runs at every call for clusters:
+    Frontier voxels are a small share of the grid, and this runs at most calls for clusters:
     64 voxels are read at a time, and only the set bits of a word are visited."""
     out = np.empty((count, 3), dtype=np.int64)
     de_bruijn = np.uint64(_DE_BRUIJN)
@@ -197,25 +198,29 @@ class FrontierTracker:
             Clusters in C order of their first voxel, with ids 0, 1, ...
         """
         self.update()
+        # Taken before the pieces are made again, and the old pieces let go: a call that fails
+        # half-way leaves the next one to start from scratch.
         region, self._changed = self._changed, None
+        old, self._pieces = self._pieces, None
         if self._count == 0:
-            self._pieces = None
             return []
         cell_voxels = max_extent_m / self._map.voxel_size
-        old = self._pieces
         if old is not None and old.cell_voxels == cell_voxels:
             pieces = old if region is None else self._pieces_again(old, region)
         else:
             _, ny, nz = self._map.shape
             pieces = self._pieces_of(_true_indices(self._bits, ny, nz, self._count), cell_voxels)
         self._pieces = pieces
+        # Each call hands out centroids and normals of its own (rows of fresh arrays), as made
+        # from scratch; the voxel lists are read-only views of the kept pieces.
+        centroids, normals = pieces.centroid.copy(), pieces.normal.copy()
         result: list[FrontierCluster] = []
         # Only the kept pieces are cut out (most pieces are smaller than `min_size`).
         for p in np.flatnonzero(pieces.size >= min_size):
             start, size = int(pieces.start[p]), int(pieces.size[p])
             result.append(FrontierCluster(
                 id=len(result), indices=pieces.grouped[start:start + size],
-                centroid=pieces.centroid[p], normal=pieces.normal[p], size=size,
+                centroid=centroids[p], normal=normals[p], size=size,
             ))
         return result
 
@@ -230,6 +235,8 @@ class FrontierTracker:
         kept = ~touched_components(old, region)
         rest = self._bits.copy()
         cleared = clear_bits(rest, old.voxel_flat[kept[old.voxel_comp]])
+        if cleared == self._count and kept.all():
+            return old  # every component kept, and no frontier voxel outside them
         _, ny, nz = self._map.shape
         new = self._pieces_of(_true_indices(rest, ny, nz, self._count - cleared), old.cell_voxels)
         return merged(old, kept, new)

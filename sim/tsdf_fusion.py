@@ -199,7 +199,8 @@ def _fuse(slots: npt.NDArray[np.int64], keys: npt.NDArray[np.int32],
 _DEPTH_STRIDE = 4
 # Samples per pixel less one (`DepthTouchCPU`'s `step_size`).
 _STEPS = 3
-# A block key's axes packed in one int64: 21 bits each, offset by half their range.
+# A block key's axes packed in one int64: 21 bits each, offset by half their range, so a key
+# must lie within 2^20 blocks of the origin on each axis (420 km at the default 0.4 m blocks).
 _KEY_BITS = 21
 _KEY_HALF = 1 << (_KEY_BITS - 1)
 # Fibonacci hashing's multiplier, 2^64 / the golden ratio: the set's slot is the product's top

@@ -196,6 +196,36 @@ def test_clusters_kept_between_calls_are_those_made_from_scratch(seed: int) -> N
     assert reused > 20
 
 
+def test_a_failed_clusters_call_leaves_the_next_to_start_again(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A call that fails while making the pieces again (out of memory, say) keeps no pieces:
+    the next call gives the clusters of the map as it is, not those of the call before; and
+    a cluster's centroid and normal are the caller's own (changing them changes nothing the
+    tracker keeps)."""
+    import sim.frontiers
+
+    rng = np.random.default_rng(5)
+    m = OccupancyMap((0.0, 0.0, 0.0), (40, 40, 10), 0.1)
+    tracker = FrontierTracker(m)
+    for _ in range(5):
+        integrate_random(m, rng, 40)
+    before = tracker.clusters(min_size=1, max_extent_m=0.6)
+    before[0].centroid[:] = -1.0
+    before[0].normal[:] = 0.0
+    integrate_random(m, rng, 300)
+
+    def failing(*args: object) -> None:
+        raise MemoryError
+
+    monkeypatch.setattr(sim.frontiers, "merged", failing)
+    monkeypatch.setattr(sim.frontiers, "pieces_of", failing)
+    with pytest.raises(MemoryError):
+        tracker.clusters(min_size=1, max_extent_m=0.6)
+    monkeypatch.undo()
+    _assert_same_clusters(tracker.clusters(min_size=1, max_extent_m=0.6),
+                          FrontierTracker(m).clusters(1, 0.6))
+
+
 def test_a_component_is_touched_by_a_region_within_one_voxel_of_its_box() -> None:
     """`touched_components`: a region meeting a component's box grown by one voxel touches it
     (a voxel there may join it), one farther does not; the region is half-open."""
