@@ -3,53 +3,21 @@ unknown, their spreading onto points, and the flight time of a rest-to-rest leg.
 
 from __future__ import annotations
 
-import math
-
 import numba
 import numpy as np
 import numpy.typing as npt
 
 from planners.search import IndexArray
+from sim.frontier_pieces import unknown_directions
 from sim.map_view import MapView
-from sim.occupancy import VoxelState
 
 FloatArray = npt.NDArray[np.float64]
-_UNKNOWN = np.uint8(VoxelState.UNKNOWN)
-
-
-@numba.njit(cache=True)
-def _normals(state: npt.NDArray[np.uint8], voxels: IndexArray) -> FloatArray:
-    nx, ny, nz = state.shape
-    out = np.zeros((voxels.shape[0], 3))
-    for r in range(voxels.shape[0]):
-        i, j, k = voxels[r, 0], voxels[r, 1], voxels[r, 2]
-        x = 0.0
-        y = 0.0
-        z = 0.0
-        if i + 1 < nx and state[i + 1, j, k] == _UNKNOWN:
-            x += 1.0
-        if i > 0 and state[i - 1, j, k] == _UNKNOWN:
-            x -= 1.0
-        if j + 1 < ny and state[i, j + 1, k] == _UNKNOWN:
-            y += 1.0
-        if j > 0 and state[i, j - 1, k] == _UNKNOWN:
-            y -= 1.0
-        if k + 1 < nz and state[i, j, k + 1] == _UNKNOWN:
-            z += 1.0
-        if k > 0 and state[i, j, k - 1] == _UNKNOWN:
-            z -= 1.0
-        norm = math.sqrt(x * x + y * y + z * z)
-        if norm > 0.0:
-            out[r, 0] = x / norm
-            out[r, 1] = y / norm
-            out[r, 2] = z / norm
-    return out
 
 
 def frontier_normals(view: MapView, voxels: IndexArray) -> FloatArray:
     """(F, 3) unit normals of (F, 3) frontier voxels: the normalised sum of the directions to
     their unknown face neighbours (zero where those cancel out)."""
-    return _normals(view.state, np.ascontiguousarray(voxels, dtype=np.int64))
+    return unknown_directions(view.state, np.ascontiguousarray(voxels, dtype=np.int64))
 
 
 @numba.njit(cache=True)

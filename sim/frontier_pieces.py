@@ -171,7 +171,7 @@ def _rows(source: IndexArray, start: IndexArray, size: IndexArray) -> IndexArray
 
 
 @numba.njit(cache=True)
-def _unknown_directions(state: StateGrid, indices: IndexArray) -> FloatArray:
+def unknown_directions(state: StateGrid, indices: IndexArray) -> FloatArray:
     """(K, 3) unit direction from each voxel toward its UNKNOWN 6-neighbours (zero if none).
 
     state: (nx, ny, nz) uint8 `VoxelState`; indices: (K, 3) int64 in-grid voxels.
@@ -206,10 +206,10 @@ def _unknown_directions(state: StateGrid, indices: IndexArray) -> FloatArray:
 @numba.njit(cache=True)
 def _label_sums(state: StateGrid, indices: IndexArray, labels: IndexArray, n: int,
                 origin: FloatArray, voxel_size: float) -> tuple[FloatArray, FloatArray]:
-    """Per label, the (n, 3) sums of its voxels' `_unknown_directions` and of their centres
+    """Per label, the (n, 3) sums of its voxels' `unknown_directions` and of their centres
     (world: origin + (index + 0.5) * voxel_size), added in the order of `indices` (K, 3); one
     pass instead of a grid of directions and centres and six weighted counts."""
-    directions = _unknown_directions(state, indices)
+    directions = unknown_directions(state, indices)
     dir_sums = np.zeros((n, 3))
     centre_sums = np.zeros((n, 3))
     for p in range(indices.shape[0]):
