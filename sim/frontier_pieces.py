@@ -34,10 +34,8 @@ class Pieces:
 
     Attributes:
         cell_voxels: the widest a piece may be, in voxels (the cut they were made with).
-        comp_lo, comp_hi: (C, 3) int64 inclusive voxel box of each component.
-        voxel_flat: (F,) int64 flat C-order index of each voxel; voxel_comp: (F,) its component
-            (after `merged`, components and voxels are in no particular order; nothing reads
-            them in order).
+        comp_lo, comp_hi: (C, 3) int64 inclusive voxel box of each component (after `merged`,
+            components are in no particular order).
         grouped: (F, 3) int64 the voxels, piece after piece, each piece in C order.
         start, size: (P,) int64 each piece's rows in `grouped`; pieces in C order of their
             first voxel.
@@ -49,8 +47,6 @@ class Pieces:
     cell_voxels: float
     comp_lo: IndexArray
     comp_hi: IndexArray
-    voxel_flat: IndexArray
-    voxel_comp: IndexArray
     grouped: IndexArray
     start: IndexArray
     size: IndexArray
@@ -69,9 +65,8 @@ def pieces_of(indices: IndexArray, shape: tuple[int, int, int], state: StateGrid
     if len(indices) == 0:
         none = np.zeros(0, dtype=np.int64)
         boxes = np.zeros((0, 3), dtype=np.int64)
-        return _frozen(Pieces(cell_voxels, boxes, boxes.copy(), none, none.copy(), boxes.copy(),
-                              none.copy(), none.copy(), none.copy(), none.copy(),
-                              np.zeros((0, 3)), np.zeros((0, 3))))
+        return _frozen(Pieces(cell_voxels, boxes, boxes.copy(), boxes.copy(), none, none.copy(),
+                              none.copy(), none.copy(), np.zeros((0, 3)), np.zeros((0, 3))))
     # The neighbour pairs are found once, joining the components as they are; the cells then
     # join along them.
     pairs, components, n_comp = _pairs_and_components(indices, ny, nz)
@@ -89,12 +84,11 @@ def pieces_of(indices: IndexArray, shape: tuple[int, int, int], state: StateGrid
     start = np.cumsum(sizes) - sizes
     heads = grouped[start]
     first = (heads[:, 0] * ny + heads[:, 1]) * nz + heads[:, 2]
-    flat = (indices[:, 0] * ny + indices[:, 1]) * nz + indices[:, 2]
     # A piece lies in one component: every voxel of a label gives it the same one.
     comp = np.empty(n, dtype=np.int64)
     comp[labels] = components
-    return _frozen(Pieces(cell_voxels, comp_lo, comp_hi, flat, components, grouped, start, sizes,
-                          first, comp, centroid, normal))
+    return _frozen(Pieces(cell_voxels, comp_lo, comp_hi, grouped, start, sizes, first, comp,
+                          centroid, normal))
 
 
 def touched_components(pieces: Pieces, region: IndexBox) -> npt.NDArray[np.bool_]:
@@ -109,7 +103,6 @@ def merged(kept_from: Pieces, kept: npt.NDArray[np.bool_], new: Pieces) -> Piece
     whole components), numbered again by their first voxel."""
     renumber = np.cumsum(kept) - 1
     offset = int(np.count_nonzero(kept))
-    old_voxels = kept[kept_from.voxel_comp]
     old_pieces = kept[kept_from.comp]
     first = np.concatenate([kept_from.first[old_pieces], new.first])
     order = np.argsort(first, kind="stable")  # distinct first voxels: any sort gives the order
@@ -121,8 +114,6 @@ def merged(kept_from: Pieces, kept: npt.NDArray[np.bool_], new: Pieces) -> Piece
         kept_from.cell_voxels,
         np.concatenate([kept_from.comp_lo[kept], new.comp_lo]),
         np.concatenate([kept_from.comp_hi[kept], new.comp_hi]),
-        np.concatenate([kept_from.voxel_flat[old_voxels], new.voxel_flat]),
-        np.concatenate([renumber[kept_from.voxel_comp[old_voxels]], new.voxel_comp + offset]),
         grouped,
         np.cumsum(size) - size,
         size,
@@ -142,17 +133,28 @@ def _frozen(pieces: Pieces) -> Pieces:
     return pieces
 
 
+def clear_kept(bits: npt.NDArray[np.uint64], pieces: Pieces, kept: npt.NDArray[np.bool_],
+               ny: int, nz: int) -> int:
+    """Clear in `bits` (one bit per voxel of a (.., ny, nz) grid: word v >> 6, bit v & 63 of
+    flat index v) the voxels of the components marked in `kept` (C,); returns how many bits
+    were set."""
+    return _clear_rows(bits, pieces.grouped, pieces.start, pieces.size, kept[pieces.comp], ny, nz)
+
+
 @numba.njit(cache=True)
-def clear_bits(bits: npt.NDArray[np.uint64], flat: IndexArray) -> int:
-    """Clear the bits of the voxels `flat` (K,) in `bits` (one bit per voxel: word v >> 6, bit
-    v & 63); returns how many were set."""
+def _clear_rows(bits: npt.NDArray[np.uint64], grouped: IndexArray, start: IndexArray,
+                size: IndexArray, chosen: npt.NDArray[np.bool_], ny: int, nz: int) -> int:
+    """Clear the bits of the voxels of the `chosen` (P,) pieces (rows of `grouped`)."""
     cleared = 0
-    for p in range(flat.shape[0]):
-        v = flat[p]
-        bit = np.uint64(1) << np.uint64(v & 63)
-        if bits[v >> 6] & bit:
-            bits[v >> 6] ^= bit
-            cleared += 1
+    for p in range(start.shape[0]):
+        if not chosen[p]:
+            continue
+        for r in range(start[p], start[p] + size[p]):
+            v = (grouped[r, 0] * ny + grouped[r, 1]) * nz + grouped[r, 2]
+            bit = np.uint64(1) << np.uint64(v & 63)
+            if bits[v >> 6] & bit:
+                bits[v >> 6] ^= bit
+                cleared += 1
     return cleared
 
 

@@ -20,7 +20,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-from sim.frontier_pieces import Pieces, clear_bits, merged, pieces_of, touched_components
+from sim.frontier_pieces import Pieces, clear_kept, merged, pieces_of, touched_components
 from sim.geometry import FloatArray
 from sim.occupancy import IndexArray, IndexBox, OccupancyMap, StateGrid, VoxelState
 
@@ -233,10 +233,10 @@ class FrontierTracker:
         """`old`'s pieces of the components the `region` recomputed since does not touch, and
         the pieces of the rest of the frontier made again (`sim.frontier_pieces`)."""
         kept = ~touched_components(old, region)
+        _, ny, nz = self._map.shape
         rest = self._bits.copy()
-        cleared = clear_bits(rest, old.voxel_flat[kept[old.voxel_comp]])
+        cleared = clear_kept(rest, old, kept, ny, nz)
         if cleared == self._count and kept.all():
             return old  # every component kept, and no frontier voxel outside them
-        _, ny, nz = self._map.shape
         new = self._pieces_of(_true_indices(rest, ny, nz, self._count - cleared), old.cell_voxels)
         return merged(old, kept, new)

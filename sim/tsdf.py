@@ -75,7 +75,6 @@ class TsdfVolume:
         table starts with room for them. Which slot holds a block changes nothing a run
         computes (see `_make_room`)."""
         self.config = config
-        self._max_range = float(max_range_m)
         self._fusion = FusionParameters.of(intrinsic, config.voxel_size_m,
                                            config.trunc_voxel_multiplier, max_range_m)
         self._grid = block_grid(
@@ -101,9 +100,9 @@ class TsdfVolume:
     def integrate(self, depth: npt.NDArray[np.float32], pose: Pose) -> None:
         """Fuse one float32 z-depth image (NaN = no return) seen from `pose`."""
         clean, within = _without_nan(np.ascontiguousarray(depth, dtype=np.float32).reshape(-1),
-                                     np.float32(self._max_range))
+                                     self._fusion.depth_max)
         if not within:
-            return  # nothing within range: Open3D would raise "no block is touched"
+            return  # nothing within range: no block is touched
         clean = clean.reshape(depth.shape)
         extrinsic = self.extrinsic(pose)
         # Open3D's block coordinates and `integrate` values to the bit, compiled
