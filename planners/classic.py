@@ -28,7 +28,7 @@ from pydantic import Field
 
 from planners.api import Observation, Plan, Planner, PlannerConfig, PlannerContext
 from planners.give_up import GiveUpTracker
-from planners.search import BoolGrid, DistanceField, IndexArray, shortcut
+from planners.search import BoolGrid, CompiledAccept, DistanceField, IndexArray, shortcut
 from planners.viewpoints import ViewpointCandidates, ring_offsets
 from planners.waypoints import (
     escape_starts,
@@ -148,7 +148,7 @@ class ClassicPlanner(Planner):
         # the nearest viewpoint is the same as with every candidate tested first, at a fraction
         # of the tests on large maps.
         field = (self._search(view.traversable, starts, view.voxel_size, candidates.eyes,
-                              candidates.accepts) if len(candidates) else None)
+                              candidates) if len(candidates) else None)
         goal = None if field is None else field.nearest_goal
         if field is None or goal is None:
             if len(candidates.all()) == 0:
@@ -168,7 +168,8 @@ class ClassicPlanner(Planner):
 
     @staticmethod
     def _search(traversable: BoolGrid, starts: IndexArray, voxel_size: float,
-                goals: BoolGrid, accept: Callable[[IndexArray], bool] | None = None,
+                goals: BoolGrid,
+                accept: Callable[[IndexArray], bool] | CompiledAccept | None = None,
                 ) -> DistanceField | None:
         """The search from the first of `starts` that reaches a goal, skipping starts a failed
         search already reached (the same pocket), at most `_MAX_POCKETS` searches; None when

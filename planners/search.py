@@ -7,6 +7,7 @@ any planner can reuse them with its own notion of where the vehicle may fly.
 from __future__ import annotations
 
 import threading
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from functools import cached_property
 from typing import Any
@@ -181,6 +182,46 @@ def _dijkstra(
     return -1, touched, n_touched, heap, size
 
 
+@numba.njit(cache=True)
+def resume_search(
+    passable: BoolGrid,
+    goals: BoolGrid,
+    max_cost: float,
+    dist: npt.NDArray[np.float64],
+    parent: npt.NDArray[np.int64],
+    done: npt.NDArray[np.bool_],
+    touched: npt.NDArray[np.int64],
+    n_touched: int,
+    heap: HeapArray,
+    size: int,
+    expand: int,
+) -> tuple[int, npt.NDArray[np.int64], int, HeapArray, int]:
+    """`_dijkstra` over the 26-neighbourhood (`max_cost` in voxels): the search a
+    `CompiledAccept` runs on from its own compiled code."""
+    return _dijkstra(passable, goals, _OFFSETS, _STEP_COST, max_cost, dist, parent, done,
+                     touched, n_touched, heap, size, expand)
+
+
+class CompiledAccept(ABC):
+    """A goal test that runs inside the compiled search, for `DistanceField(accept=...)`.
+
+    A Python callable is asked once for every goal the search reaches and turns down; where
+    that happens hundreds of times a search, the return to Python for each costs more than the
+    test. A `CompiledAccept` runs the search itself, in compiled code, and stops at the first
+    goal it accepts: the same voxels in the same order as the callable would give.
+    """
+
+    @abstractmethod
+    def search_on(
+        self, passable: BoolGrid, goals: BoolGrid, max_cost: float,
+        dist: npt.NDArray[np.float64], parent: npt.NDArray[np.int64],
+        done: npt.NDArray[np.bool_], touched: npt.NDArray[np.int64], n_touched: int,
+        heap: HeapArray, size: int,
+    ) -> tuple[int, npt.NDArray[np.int64], int, HeapArray, int]:
+        """Call `resume_search` with these arguments, `expand` -1 at first and then each goal
+        turned down, until it returns a goal this test accepts or -1; return its answer."""
+
+
 class _Workspace:
     """Flat buffers over one grid, reused by every search in a thread and clean between them:
     a search then costs what it visits, not the grid's size (allocating and filling three
@@ -217,8 +258,9 @@ class DistanceField:
     With `goals`, the search stops at the nearest goal voxel (`nearest_goal`); distances are then
     final only for voxels no farther than that goal. With `accept` as well, a goal voxel is one
     only if `accept(voxel)` says so, asked as the search reaches it, nearest first: a test too
-    costly to run on every goal ahead of the search is run on those nearer than the answer.
-    Results are kept for the visited voxels only; `dist_m` expands them to a grid when asked.
+    costly to run on every goal ahead of the search is run on those nearer than the answer
+    (`accept` a `CompiledAccept`: the same, asked from compiled code). Results are kept for
+    the visited voxels only; `dist_m` expands them to a grid when asked.
     """
 
     def __init__(
@@ -228,7 +270,7 @@ class DistanceField:
         voxel_size: float,
         *,
         goals: BoolGrid | None = None,
-        accept: Callable[[IndexArray], bool] | None = None,
+        accept: Callable[[IndexArray], bool] | CompiledAccept | None = None,
         max_cost_m: float = np.inf,
     ) -> None:
         self.shape = passable.shape
@@ -249,56 +291,89 @@ class DistanceField:
         heap = _new_heap(1 << 12)
         _heap_push(heap, 0, 0.0, s)
         count, size = 1, 1
-        goal = -1
-        while True:
-            goal, ws.touched, count, heap, size = _dijkstra(
-                passable, goal_mask, _OFFSETS, _STEP_COST, max_cost_m / voxel_size,
-                ws.dist, ws.parent, ws.done, ws.touched, count, heap, size, goal,
-            )
-            if goal < 0 or accept is None or accept(
-                np.array(np.unravel_index(goal, self.shape), dtype=np.int64)
-            ):
-                break
+        max_cost = max_cost_m / voxel_size
+        if isinstance(accept, CompiledAccept):
+            goal, ws.touched, count, heap, size = accept.search_on(
+                passable, goal_mask, max_cost, ws.dist, ws.parent, ws.done, ws.touched, count,
+                heap, size)
+        else:
+            goal = -1
+            while True:
+                goal, ws.touched, count, heap, size = resume_search(
+                    passable, goal_mask, max_cost, ws.dist, ws.parent, ws.done, ws.touched,
+                    count, heap, size, goal,
+                )
+                if goal < 0 or accept is None or accept(
+                    np.array(np.unravel_index(goal, self.shape), dtype=np.int64)
+                ):
+                    break
         visited = ws.touched[:count]
-        self._index = np.sort(visited)
-        self._dist_m = ws.dist[self._index] * voxel_size
-        self._parent = ws.parent[self._index]
+        # What every query but the nearest goal's needs, the visited voxels sorted for lookup,
+        # is made on the first such query: a planner that asks only for the nearest goal's
+        # path (Classic, at every plan) does not pay for a sort of the whole search.
+        self._visited = visited.copy()
+        self._visited_dist = ws.dist[visited]
+        self._visited_parent = ws.parent[visited]
+        self._goal_chain: list[int] = []
+        self._goal_dist_m = float("inf")
+        if goal >= 0:
+            self._goal_chain.append(goal)
+            while (up := int(ws.parent[self._goal_chain[-1]])) >= 0:
+                self._goal_chain.append(up)
+            self._goal_dist_m = float(ws.dist[goal] * voxel_size)
         ws.clean(visited)
         self.nearest_goal: IndexArray | None = (
             np.array(np.unravel_index(goal, self.shape), dtype=np.int64) if goal >= 0 else None
         )
+        self._goal = goal
+
+    @cached_property
+    def _lookup(self) -> tuple[IndexArray, npt.NDArray[np.float64], IndexArray]:
+        """The visited voxels' flat indices sorted, with their path lengths (m) and parents."""
+        order = np.argsort(self._visited, kind="stable")
+        index = self._visited[order]
+        return index, self._visited_dist[order] * self.voxel_size, self._visited_parent[order]
 
     @cached_property
     def dist_m(self) -> npt.NDArray[np.float64]:
         """(nx, ny, nz) path lengths in metres, inf where the search did not reach."""
+        index, dist_m, _ = self._lookup
         flat = np.full(int(np.prod(self.shape)), np.inf, dtype=np.float64)
-        flat[self._index] = self._dist_m
+        flat[index] = dist_m
         grid: npt.NDArray[np.float64] = flat.reshape(self.shape)
         grid.setflags(write=False)
         return grid
 
     def _position(self, flat: int) -> int:
-        """Where voxel `flat` is in the visited arrays, -1 if it was not visited."""
-        pos = int(np.searchsorted(self._index, flat))
-        return pos if pos < len(self._index) and self._index[pos] == flat else -1
+        """Where voxel `flat` is in the sorted visited arrays, -1 if it was not visited."""
+        index = self._lookup[0]
+        pos = int(np.searchsorted(index, flat))
+        return pos if pos < len(index) and index[pos] == flat else -1
 
     def distance_to(self, voxel: npt.ArrayLike) -> float:
         """Path length (m) to `voxel` (3,), inf if the search did not reach it."""
         v = np.asarray(voxel, dtype=np.int64)
-        pos = self._position(int(np.ravel_multi_index(tuple(v), self.shape)))
-        return float(self._dist_m[pos]) if pos >= 0 else float("inf")
+        flat = int(np.ravel_multi_index(tuple(v), self.shape))
+        if flat == self._goal:
+            return self._goal_dist_m
+        pos = self._position(flat)
+        return float(self._lookup[1][pos]) if pos >= 0 else float("inf")
 
     def path_to(self, goal: npt.ArrayLike) -> IndexArray:
         """(K, 3) voxel indices from the start to `goal`; empty if unreachable."""
         g = np.asarray(goal, dtype=np.int64)
         flat = int(np.ravel_multi_index(tuple(g), self.shape))
-        pos = self._position(flat)
-        if pos < 0 or not np.isfinite(self._dist_m[pos]):
-            return np.zeros((0, 3), dtype=np.int64)
-        chain = [flat]
-        while (up := int(self._parent[pos])) >= 0:
-            chain.append(up)
-            pos = self._position(up)
+        if flat == self._goal:
+            chain = self._goal_chain
+        else:
+            _, dist_m, parent = self._lookup
+            pos = self._position(flat)
+            if pos < 0 or not np.isfinite(dist_m[pos]):
+                return np.zeros((0, 3), dtype=np.int64)
+            chain = [flat]
+            while (up := int(parent[pos])) >= 0:
+                chain.append(up)
+                pos = self._position(up)
         return np.stack(np.unravel_index(np.array(chain[::-1]), self.shape), axis=1)
 
 

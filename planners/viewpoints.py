@@ -15,7 +15,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-from planners.search import BoolGrid, IndexArray
+from planners.search import BoolGrid, CompiledAccept, HeapArray, IndexArray, resume_search
 from sim.map_view import FrontierCluster, MapView
 from sim.occupancy import VoxelState
 
@@ -138,6 +138,41 @@ def _first_in_sight(state: npt.NDArray[np.uint8], into_unknown: bool,
 
 
 @numba.njit(cache=True)
+def _first_at(flat: int, state: npt.NDArray[np.uint8], into_unknown: bool,
+              eyes: npt.NDArray[np.int64], targets: npt.NDArray[np.int64],
+              pair_t: npt.NDArray[np.int64], by_eye: npt.NDArray[np.int64],
+              first: npt.NDArray[np.int64]) -> int:
+    """`_first_in_sight` over the candidates at eye voxel `flat` (the rows `by_eye` lists for
+    it), remembered in `first` at the group's first position (-2: not yet asked)."""
+    n = max(eyes.shape[0], 1)
+    lo = np.searchsorted(by_eye, flat * n)
+    hi = np.searchsorted(by_eye, (flat + 1) * n)
+    if lo == hi:
+        return -1
+    if first[lo] == -2:
+        first[lo] = _first_in_sight(state, into_unknown, eyes, targets, pair_t, by_eye[lo:hi] % n)
+    return first[lo]
+
+
+@numba.njit(cache=True)
+def _nearest_in_sight(
+    passable: BoolGrid, goals: BoolGrid, max_cost: float, dist: npt.NDArray[np.float64],
+    parent: npt.NDArray[np.int64], done: npt.NDArray[np.bool_], touched: npt.NDArray[np.int64],
+    n_touched: int, heap: HeapArray, size: int, state: npt.NDArray[np.uint8],
+    into_unknown: bool, eyes: npt.NDArray[np.int64], targets: npt.NDArray[np.int64],
+    pair_t: npt.NDArray[np.int64], by_eye: npt.NDArray[np.int64], first: npt.NDArray[np.int64],
+) -> tuple[int, npt.NDArray[np.int64], int, HeapArray, int]:
+    """The search run on to the first eye voxel with a candidate in sight (`CompiledAccept`)."""
+    goal = -1
+    while True:
+        goal, touched, n_touched, heap, size = resume_search(
+            passable, goals, max_cost, dist, parent, done, touched, n_touched, heap, size, goal)
+        if goal < 0 or _first_at(goal, state, into_unknown, eyes, targets, pair_t, by_eye,
+                                 first) >= 0:
+            return goal, touched, n_touched, heap, size
+
+
+@numba.njit(cache=True)
 def _candidate_pairs(
     traversable: BoolGrid, target_c: npt.NDArray[np.float64],
     offset_vox: npt.NDArray[np.float64], extra_c: npt.NDArray[np.float64],
@@ -229,10 +264,11 @@ def ring_offsets(distances_m: tuple[float, ...], heights_m: tuple[float, ...],
     return np.array(rows, dtype=np.float64)
 
 
-class ViewpointCandidates:
+class ViewpointCandidates(CompiledAccept):
     """The candidate viewpoints of up to `samples_per_cluster` voxels of each cluster, with the
     costly test, the line of sight, run only where asked: for every candidate (`all`), or for
-    the candidates at one eye voxel (`first_at`), as a search reaches them nearest first.
+    the candidates at one eye voxel (`first_at`), as a search reaches them nearest first (as
+    `DistanceField(accept=candidates)`, from the compiled search).
 
     Args:
         offsets_m: (R, 3) candidate offsets from a frontier voxel centre.
@@ -279,7 +315,8 @@ class ViewpointCandidates:
         n = max(len(self._voxels), 1)
         flat = np.ravel_multi_index(tuple(self._voxels.T), view.shape)
         self._by_eye = np.sort(flat * n + np.arange(len(self._voxels)))
-        self._first: dict[int, int] = {}
+        # `first_at`'s answers, at each eye's first position in `_by_eye` (-2: not yet asked).
+        self._first = np.full(len(self._voxels), -2, dtype=np.int64)
 
     def __len__(self) -> int:
         """Candidates before the line-of-sight test."""
@@ -289,15 +326,20 @@ class ViewpointCandidates:
         """The first candidate at eye `voxel` (3,) that passes the line-of-sight test, as an
         index into `all`'s order before filtering; -1 if none does."""
         flat = int(np.ravel_multi_index(tuple(voxel), self._view.shape))
-        if flat not in self._first:
-            n = max(len(self._voxels), 1)
-            lo, hi = np.searchsorted(self._by_eye, [flat * n, (flat + 1) * n])
-            view = self._view
-            self._first[flat] = _first_in_sight(
-                view.state, self._into_unknown, self._voxels, self._target_idx, self._pair_t,
-                self._by_eye[lo:hi] % n,
-            )
-        return self._first[flat]
+        return int(_first_at(flat, self._view.state, self._into_unknown, self._voxels,
+                             self._target_idx, self._pair_t, self._by_eye, self._first))
+
+    def search_on(
+        self, passable: BoolGrid, goals: BoolGrid, max_cost: float,
+        dist: npt.NDArray[np.float64], parent: npt.NDArray[np.int64],
+        done: npt.NDArray[np.bool_], touched: npt.NDArray[np.int64], n_touched: int,
+        heap: HeapArray, size: int,
+    ) -> tuple[int, npt.NDArray[np.int64], int, HeapArray, int]:
+        """The search run on to the nearest eye voxel with a candidate in sight."""
+        return _nearest_in_sight(
+            passable, goals, max_cost, dist, parent, done, touched, n_touched, heap, size,
+            self._view.state, self._into_unknown, self._voxels, self._target_idx, self._pair_t,
+            self._by_eye, self._first)
 
     def accepts(self, voxel: IndexArray) -> bool:
         """Whether a candidate at eye `voxel` passes the line-of-sight test."""

@@ -528,3 +528,32 @@ def test_grid_path_snaps_both_ends_and_goes_round_a_wall() -> None:
     state[20, 24:28, :] = VoxelState.OCCUPIED
     closed = stack_from_state(state, 0.1, 0.15).view()
     assert grid_path(closed, PathCache(), here, there) is None
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_nearest_goals_path_kept_at_the_end_is_the_whole_fields(seed: int) -> None:
+    """The nearest goal's path and length, read from the search's buffers before they are
+    cleaned, are those of a search over everything reachable (whose settled voxels' parents
+    are the same); every other voxel is answered from the sorted visited voxels, in any order
+    of the queries."""
+    rng = np.random.default_rng(40 + seed)
+    passable = rng.random((20, 18, 6)) > 0.3
+    start = np.argwhere(passable)[0]
+    goals = passable & (rng.random(passable.shape) < 0.02)
+    goals[tuple(start)] = False
+    near = DistanceField(passable, start, VOXEL, goals=goals)
+    whole = DistanceField(passable, start, VOXEL)
+    goal = near.nearest_goal
+    assert goal is not None and len(near.path_to(goal)) > 2
+    np.testing.assert_array_equal(near.path_to(goal), whole.path_to(goal))
+    assert near.distance_to(goal) == whole.distance_to(goal) == whole.dist_m[tuple(goal)]
+    # Other voxels the goal search settled: the same answers, asked before and after dist_m.
+    settled = np.argwhere(near.dist_m <= near.distance_to(goal))
+    assert len(settled) > 10
+    for voxel in settled[rng.permutation(len(settled))[:20]]:
+        np.testing.assert_array_equal(near.path_to(voxel), whole.path_to(voxel))
+        assert near.distance_to(voxel) == whole.distance_to(voxel)
+    fresh = DistanceField(passable, start, VOXEL, goals=goals)
+    unreached = np.argwhere(~np.isfinite(near.dist_m))[0]
+    assert fresh.distance_to(unreached) == np.inf and len(fresh.path_to(unreached)) == 0
+    np.testing.assert_array_equal(fresh.dist_m, near.dist_m)

@@ -10,6 +10,7 @@ import numpy.typing as npt
 import pytest
 
 from planners.classic import ClassicConfig
+from planners.search import DistanceField
 from planners.viewpoints import (
     FACES,
     ViewpointCandidates,
@@ -193,3 +194,53 @@ def test_sampled_voxels_are_the_linspace_picks_of_each_cluster(samples: int) -> 
         np.testing.assert_array_equal(ids, want_ids)
     assert _sampled([], samples, None)[0].shape == (0, 3)
     assert len(_sampled(clusters[9:], samples, excluded)[1]) == 0
+
+
+@pytest.mark.parametrize(("seed", "into_unknown"), [(0, False), (1, True), (2, True), (3, False)])
+def test_the_compiled_search_picks_what_asking_from_python_picks(
+        make_stack: StackFactory, seed: int, into_unknown: bool) -> None:
+    """`DistanceField(accept=candidates)`, the eyes tested from the compiled search, finds the
+    goal, the field and the path that asking `candidates.accepts` from Python finds, from every
+    start, with answers remembered between the searches or not."""
+    rng = np.random.default_rng(300 + seed)
+    shape = (36, 30, 16)
+    state = np.full(shape, VoxelState.FREE, dtype=np.uint8)
+    state[rng.random(shape) < 0.04] = VoxelState.OCCUPIED
+    for _ in range(4):
+        lo = rng.integers(0, np.array(shape) - 6)
+        state[tuple(slice(a, a + int(rng.integers(3, 7))) for a in lo)] = VoxelState.UNKNOWN
+    view = make_stack(state, 0.1, 0.2).view()
+    cfg = ClassicConfig()
+    offsets = ring_offsets(cfg.view_distances_m, cfg.view_height_offsets_m, cfg.view_directions)
+
+    def candidates() -> ViewpointCandidates:
+        return ViewpointCandidates(
+            view, view.frontier_clusters(1), offsets,
+            samples_per_cluster=cfg.samples_per_cluster,
+            max_elevation_rad=np.radians(cfg.max_view_elevation_deg), max_range_m=3.0,
+            into_unknown=into_unknown)
+
+    compiled, asked = candidates(), candidates()
+    starts = np.argwhere(view.traversable)
+    turned_down = 0
+    for start in starts[rng.permutation(len(starts))[:24]]:
+        fast = DistanceField(view.traversable, start, 0.1, goals=compiled.eyes, accept=compiled)
+        slow = DistanceField(view.traversable, start, 0.1, goals=asked.eyes,
+                             accept=asked.accepts)
+        alone = candidates()
+        first = DistanceField(view.traversable, start, 0.1, goals=alone.eyes, accept=alone)
+        plain = DistanceField(view.traversable, start, 0.1, goals=asked.eyes)
+        for field in (fast, first):
+            assert (field.nearest_goal is None) == (slow.nearest_goal is None)
+            np.testing.assert_array_equal(field.dist_m, slow.dist_m)
+        if slow.nearest_goal is None:
+            continue
+        goal = slow.nearest_goal
+        turned_down += int(plain.nearest_goal is not None
+                           and tuple(plain.nearest_goal) != tuple(goal))
+        for field, cands in ((fast, compiled), (first, alone)):
+            np.testing.assert_array_equal(field.nearest_goal, goal)
+            np.testing.assert_array_equal(field.path_to(goal), slow.path_to(goal))
+            assert field.distance_to(goal) == slow.distance_to(goal)
+            np.testing.assert_array_equal(cands.target_at(goal), asked.target_at(goal))
+    assert turned_down > 0, "no search turned a nearer eye down"
