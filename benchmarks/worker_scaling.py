@@ -1,7 +1,13 @@
 """Two workers against one, with and without the thread limit per worker process.
 
     .venv/bin/python benchmarks/worker_scaling.py [--areas maze offices-a] [--episodes 8]
-        [--seconds 60] [--planner classic] [--rounds 2]
+        [--seconds 60] [--planner classic] [--rounds 2] [--setups 1:one 2:shared]
+
+A fifth of a planner's suite (each built-in area once, seed 0, for its plateau time, the
+duration the service gives a run), one worker on one thread against two limited workers:
+
+    .venv/bin/python benchmarks/worker_scaling.py --areas all --episodes 11 --seconds plateau \
+        --setups 1:one 2:shared
 
 A "worker" here is a process started with the environment `flybo serve --workers N` gives
 each worker (`flybo.worker_processes.worker_environment`: the usable cores shared out,
@@ -32,7 +38,9 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from areas import area_names
 from benchmarks.common import print_table, write_json
+from flybo.versions import benchmark_version
 from flybo.worker_processes import worker_environment
 from worker.threads import LIBRARY_VARIABLES, THREADS_ENV, usable_cores
 
@@ -42,7 +50,7 @@ SETUPS = ((1, "none"), (1, "shared"), (1, "one"), (2, "none"), (2, "shared"))
 LABELS = {"none": "no limit", "shared": "limited", "one": "one thread"}
 
 
-def _child(folder: Path, planner: str, seconds: float) -> None:
+def _child(folder: Path, planner: str, seconds: float | None) -> None:
     """One worker: warm up, report ready, wait for the start, fly queued episodes."""
     from areas import load_area, load_ground_truth
     from planners.registry import make, spec
@@ -68,11 +76,13 @@ def _child(folder: Path, planner: str, seconds: float) -> None:
         except FileNotFoundError:
             continue
         wall0, cpu0 = time.perf_counter(), time.process_time()
-        run_episode(areas[task["area"]], truths[task["area"]], make(planner), config,
-                    task["seed"], planner_name=planner_id, preset_name="default",
-                    seconds=seconds)
+        area = areas[task["area"]]
+        result = run_episode(area, truths[task["area"]], make(planner), config, task["seed"],
+                             planner_name=planner_id, preset_name="default",
+                             seconds=area.plateau_s if seconds is None else seconds)
         done.append({**task, "wall_s": time.perf_counter() - wall0,
-                     "cpu_s": time.process_time() - cpu0, "end": time.time()})
+                     "cpu_s": time.process_time() - cpu0, "end": time.time(),
+                     "simulated_s": result.simulated_until})
     (folder / f"done-{os.getpid()}.json").write_text(json.dumps(done))
 
 
@@ -116,6 +126,18 @@ def _measure(args: argparse.Namespace, workers: int, threads: str) -> dict[str, 
             "cpu_s": sum(e["cpu_s"] for e in episodes), "episodes": episodes}
 
 
+def _setups(parser: argparse.ArgumentParser, given: list[str]) -> list[tuple[int, str]]:
+    """`--setups`' WORKERS:LIMIT pairs, checked."""
+    setups = []
+    for text in given:
+        workers, _, threads = text.partition(":")
+        if not workers.isdigit() or int(workers) < 1 or threads not in LABELS:
+            parser.error(f"--setups: {text!r} is not WORKERS:LIMIT with LIMIT one of "
+                         + ", ".join(LABELS))
+        setups.append((int(workers), threads))
+    return setups
+
+
 def _label(workers: int, threads: str) -> str:
     return f"{workers} worker{'s' if workers > 1 else ''}, {LABELS[threads]}"
 
@@ -123,47 +145,63 @@ def _label(workers: int, threads: str) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--areas", nargs="+", default=["maze", "offices-a"])
+    parser.add_argument("--areas", nargs="+", default=["maze", "offices-a"],
+                        help="area names, or 'all' (the built-in areas)")
     parser.add_argument("--episodes", type=int, default=8)
-    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--seconds", default="60",
+                        help="simulated seconds per episode, or 'plateau' (each area's)")
     parser.add_argument("--planner", default="classic")
     parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--setups", nargs="+", default=[f"{w}:{t}" for w, t in SETUPS],
+                        help="WORKERS:LIMIT pairs, LIMIT one of " + ", ".join(LABELS)
+                        + " (default: all five)")
     parser.add_argument("--child", type=Path, default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
+    try:
+        seconds = None if args.seconds == "plateau" else float(args.seconds)
+    except ValueError:
+        parser.error(f"--seconds must be a number or 'plateau', not {args.seconds!r}")
     if args.child is not None:
-        _child(args.child, args.planner, args.seconds)
+        _child(args.child, args.planner, seconds)
         return
-    if args.rounds < 1 or args.episodes < 2 or args.seconds <= 0:
+    if args.areas == ["all"]:
+        args.areas = area_names()
+    setups = _setups(parser, args.setups)
+    if args.rounds < 1 or args.episodes < 2 or (seconds is not None and seconds <= 0):
         parser.error("--rounds must be at least 1, --episodes 2 and --seconds positive")
-    measured: dict[tuple[int, str], list[dict[str, Any]]] = {s: [] for s in SETUPS}
+    measured: dict[tuple[int, str], list[dict[str, Any]]] = {s: [] for s in setups}
     rows = []
     for round_ in range(1, args.rounds + 1):
-        for workers, threads in SETUPS:
+        for workers, threads in setups:
             m = _measure(args, workers, threads)
             measured[workers, threads].append(m)
+            simulated = sum(e["simulated_s"] for e in m["episodes"])
             rows.append([round_, _label(workers, threads), f"{m['wall_s']:.1f}",
                          f"{m['cpu_s']:.1f}", f"{m['cpu_s'] / m['wall_s']:.2f}",
-                         f"{args.episodes * args.seconds / m['wall_s']:.1f}",
-                         f"{m['load_1min']:.1f}"])
+                         f"{simulated / m['wall_s']:.1f}", f"{m['load_1min']:.1f}"])
             print(f"round {round_} {_label(workers, threads)}: {m['wall_s']:.1f} s  "
                   f"({'; '.join(m['threads'])})", flush=True)
-    print_table(f"{args.episodes} x {args.seconds:g} s of {args.planner} on "
+    print_table(f"{args.episodes} x {args.seconds} s of {args.planner} on "
                 f"{', '.join(args.areas)}, {usable_cores()} usable cores",
                 ["round", "set-up", "wall s", "CPU s", "cores busy", "sim s / wall s",
                  "load before"], rows)
     wall = {s: statistics.mean(m["wall_s"] for m in ms) for s, ms in measured.items()}
-    ratios = {
-        "2 vs 1 worker, limited (flybo serve now)": wall[1, "shared"] / wall[2, "shared"],
-        "2 vs 1 worker, no limit (before)": wall[1, "none"] / wall[2, "none"],
-        "2 limited vs 1 without limit": wall[1, "none"] / wall[2, "shared"],
-        "2 limited vs 1 on one thread": wall[1, "one"] / wall[2, "shared"],
-        "2 workers: limited over no limit": wall[2, "none"] / wall[2, "shared"],
-        "1 worker: limited over no limit": wall[1, "none"] / wall[1, "shared"],
-        "1 worker: one thread over limited": wall[1, "shared"] / wall[1, "one"],
+    comparisons = {
+        "2 vs 1 worker, limited (flybo serve now)": ((1, "shared"), (2, "shared")),
+        "2 vs 1 worker, no limit (before)": ((1, "none"), (2, "none")),
+        "2 limited vs 1 without limit": ((1, "none"), (2, "shared")),
+        "2 limited vs 1 on one thread": ((1, "one"), (2, "shared")),
+        "2 workers: limited over no limit": ((2, "none"), (2, "shared")),
+        "1 worker: limited over no limit": ((1, "none"), (1, "shared")),
+        "1 worker: one thread over limited": ((1, "shared"), (1, "one")),
     }
+    ratios = {name: wall[a] / wall[b] for name, (a, b) in comparisons.items()
+              if a in wall and b in wall}
     print_table("speedup (mean wall times; > 1: the first set-up is faster)",
                 ["comparison", "speedup"], [[k, f"{v:.2f}x"] for k, v in ratios.items()])
     path = write_json("worker_scaling", {
+        "command": "python benchmarks/worker_scaling.py " + " ".join(sys.argv[1:]),
+        "benchmark": benchmark_version(),
         "areas": args.areas, "episodes": args.episodes, "seconds": args.seconds,
         "planner": args.planner, "rounds": args.rounds, "usable_cores": usable_cores(),
         "load_average_after": os.getloadavg(),
