@@ -30,25 +30,6 @@ _OFFSETS = np.array(
 _STEP_COST = np.sqrt(np.sum(_OFFSETS**2, axis=1)).astype(np.float64)
 
 
-def _cube_masks(offsets: IndexArray) -> IndexArray:
-    """(26,) for each offset, the bits (one per offset, in order) of the voxels of the cube its
-    step spans, the start left out: the step is allowed when all of them are passable."""
-    rows = [tuple(o) for o in offsets.tolist()]
-    masks = []
-    for a, b, c in rows:
-        mask = 0
-        for x in sorted({0, a}):
-            for y in sorted({0, b}):
-                for z in sorted({0, c}):
-                    if (x, y, z) != (0, 0, 0):
-                        mask |= 1 << rows.index((x, y, z))
-        masks.append(mask)
-    return np.array(masks, dtype=np.int64)
-
-
-_CUBE_MASKS = _cube_masks(_OFFSETS)
-
-
 # A search's priority queue: a binary min-heap of (key, voxel) rows in one (M, 2) float64 array,
 # the flat voxel index stored as a float (exact below 2^53), so that each level of a sift reads
 # one cache line rather than one in each of two arrays. Ties pop in the order of the classic
@@ -128,7 +109,6 @@ def _dijkstra(
     passable: BoolGrid,
     goals: BoolGrid,
     offsets: IndexArray,
-    cube_masks: IndexArray,
     step_cost: npt.NDArray[np.float64],
     max_cost: float,
     dist: npt.NDArray[np.float64],
@@ -147,8 +127,6 @@ def _dijkstra(
     has not been); the search writes its results there and lists every voxel it gave a distance
     in `touched[:n_touched]` (grown when full), so that the caller can read and clean up only
     those instead of the whole grid. `heap` and `size` are its queue (grown when full).
-    `offsets` (26, 3) are the neighbourhood's steps, `cube_masks` (26,) each step's cube
-    (`_cube_masks`) and `step_cost` (26,) its length in voxels.
     `expand`, when not -1, is the goal the previous call returned and the caller turned down: it
     is expanded first, as if it had not been a goal. Returns the goal, then the arrays in use
     with their counts, to continue from.
@@ -156,7 +134,6 @@ def _dijkstra(
     nx, ny, nz = passable.shape
     flat_passable = passable.ravel()
     flat_goals = goals.ravel()
-    steps = (offsets[:, 0] * ny + offsets[:, 1]) * nz + offsets[:, 2]  # flat index offsets
     resuming = expand >= 0
     cur = expand
     d = dist[expand] if resuming else 0.0
@@ -182,19 +159,16 @@ def _dijkstra(
         ci = cur // (ny * nz)
         cj = (cur // nz) % ny
         ck = cur % nz
-        # Which neighbours are passable, one bit each, read once: a step's corner rule is then
-        # a test of its cube's bits (`cube_masks`) rather than up to eight reads of the grid.
-        inside = 0 < ci < nx - 1 and 0 < cj < ny - 1 and 0 < ck < nz - 1
-        open_bits = 0
         for n in range(offsets.shape[0]):
-            if (inside or (0 <= ci + offsets[n, 0] < nx and 0 <= cj + offsets[n, 1] < ny
-                           and 0 <= ck + offsets[n, 2] < nz)) and flat_passable[cur + steps[n]]:
-                open_bits |= 1 << n
-        for n in range(offsets.shape[0]):
-            if open_bits & cube_masks[n] != cube_masks[n]:
+            i = ci + offsets[n, 0]
+            j = cj + offsets[n, 1]
+            k = ck + offsets[n, 2]
+            if i < 0 or j < 0 or k < 0 or i >= nx or j >= ny or k >= nz:
                 continue
-            idx = cur + steps[n]
-            if done[idx]:
+            idx = (i * ny + j) * nz + k
+            if done[idx] or not flat_passable[idx]:
+                continue
+            if not _corner_free(passable, ci, cj, ck, i, j, k):
                 continue
             nd = d + step_cost[n]
             if nd < dist[idx]:
@@ -224,8 +198,8 @@ def resume_search(
 ) -> tuple[int, npt.NDArray[np.int64], int, HeapArray, int]:
     """`_dijkstra` over the 26-neighbourhood (`max_cost` in voxels): the search a
     `CompiledAccept` runs on from its own compiled code."""
-    return _dijkstra(passable, goals, _OFFSETS, _CUBE_MASKS, _STEP_COST, max_cost, dist, parent,
-                     done, touched, n_touched, heap, size, expand)
+    return _dijkstra(passable, goals, _OFFSETS, _STEP_COST, max_cost, dist, parent, done,
+                     touched, n_touched, heap, size, expand)
 
 
 class CompiledAccept(ABC):
