@@ -32,6 +32,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+import flybo  # noqa: F401  before NumPy loads: it pins the CPU kernels (flybo.cpu_kernels)
 from areas import area_names, load_area, load_ground_truth
 from benchmarks.common import peak_rss_mib, print_table, write_json
 from flybo.versions import benchmark_version

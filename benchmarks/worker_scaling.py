@@ -20,13 +20,15 @@ flies a 5 s MAZE warm-up (the compiled kernels), limits Open3D as a run in `flyb
 episodes (the areas in turn, default preset, seeds 0, 1, ...) from one shared queue, one at a
 time, as workers take runs. The time measured is from the start signal to the last episode's
 end. Speedup: one worker's time over two workers' time, for the same episodes. Rounds
-alternate the four set-ups, so that drift in the machine's speed falls on all of them.
+alternate the set-ups (`--setups`, by default all five), so that drift in the machine's speed
+falls on all of them.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import statistics
 import subprocess
@@ -38,7 +40,9 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+import flybo  # noqa: F401  before NumPy loads: it pins the CPU kernels (flybo.cpu_kernels)
 from areas import area_names
+from areas.registry import all_area_names
 from benchmarks.common import print_table, write_json
 from flybo.versions import benchmark_version
 from flybo.worker_processes import worker_environment
@@ -128,13 +132,14 @@ def _measure(args: argparse.Namespace, workers: int, threads: str) -> dict[str, 
 
 def _setups(parser: argparse.ArgumentParser, given: list[str]) -> list[tuple[int, str]]:
     """`--setups`' WORKERS:LIMIT pairs, checked."""
-    setups = []
+    setups: list[tuple[int, str]] = []
     for text in given:
         workers, _, threads = text.partition(":")
-        if not workers.isdigit() or int(workers) < 1 or threads not in LABELS:
+        if not workers.isdecimal() or int(workers) < 1 or threads not in LABELS:
             parser.error(f"--setups: {text!r} is not WORKERS:LIMIT with LIMIT one of "
                          + ", ".join(LABELS))
-        setups.append((int(workers), threads))
+        if (int(workers), threads) not in setups:
+            setups.append((int(workers), threads))
     return setups
 
 
@@ -166,8 +171,13 @@ def main() -> None:
         return
     if args.areas == ["all"]:
         args.areas = area_names()
+    unknown = sorted(set(args.areas) - set(all_area_names()))
+    if unknown:
+        parser.error(f"--areas: unknown area(s) {', '.join(unknown)}; known: "
+                     + ", ".join(all_area_names()) + ", or 'all'")
     setups = _setups(parser, args.setups)
-    if args.rounds < 1 or args.episodes < 2 or (seconds is not None and seconds <= 0):
+    if args.rounds < 1 or args.episodes < 2 or (
+            seconds is not None and not (math.isfinite(seconds) and seconds > 0)):
         parser.error("--rounds must be at least 1, --episodes 2 and --seconds positive")
     measured: dict[tuple[int, str], list[dict[str, Any]]] = {s: [] for s in setups}
     rows = []
@@ -181,7 +191,8 @@ def main() -> None:
                          f"{simulated / m['wall_s']:.1f}", f"{m['load_1min']:.1f}"])
             print(f"round {round_} {_label(workers, threads)}: {m['wall_s']:.1f} s  "
                   f"({'; '.join(m['threads'])})", flush=True)
-    print_table(f"{args.episodes} x {args.seconds} s of {args.planner} on "
+    duration = "each area's plateau time" if seconds is None else f"{seconds:g} s"
+    print_table(f"{args.episodes} x {duration} of {args.planner} on "
                 f"{', '.join(args.areas)}, {usable_cores()} usable cores",
                 ["round", "set-up", "wall s", "CPU s", "cores busy", "sim s / wall s",
                  "load before"], rows)
@@ -202,7 +213,8 @@ def main() -> None:
     path = write_json("worker_scaling", {
         "command": "python benchmarks/worker_scaling.py " + " ".join(sys.argv[1:]),
         "benchmark": benchmark_version(),
-        "areas": args.areas, "episodes": args.episodes, "seconds": args.seconds,
+        "areas": args.areas, "episodes": args.episodes,
+        "seconds": "plateau" if seconds is None else seconds,
         "planner": args.planner, "rounds": args.rounds, "usable_cores": usable_cores(),
         "load_average_after": os.getloadavg(),
         "mean_wall_s": {_label(*s): v for s, v in wall.items()}, "speedup": ratios,

@@ -292,21 +292,27 @@ class DistanceField:
         _heap_push(heap, 0, 0.0, s)
         count, size = 1, 1
         max_cost = max_cost_m / voxel_size
-        if isinstance(accept, CompiledAccept):
-            goal, ws.touched, count, heap, size = accept.search_on(
-                passable, goal_mask, max_cost, ws.dist, ws.parent, ws.done, ws.touched, count,
-                heap, size)
-        else:
-            goal = -1
-            while True:
-                goal, ws.touched, count, heap, size = resume_search(
+        try:
+            if isinstance(accept, CompiledAccept):
+                goal, ws.touched, count, heap, size = accept.search_on(
                     passable, goal_mask, max_cost, ws.dist, ws.parent, ws.done, ws.touched,
-                    count, heap, size, goal,
-                )
-                if goal < 0 or accept is None or accept(
-                    np.array(np.unravel_index(goal, self.shape), dtype=np.int64)
-                ):
-                    break
+                    count, heap, size)
+            else:
+                goal = -1
+                while True:
+                    goal, ws.touched, count, heap, size = resume_search(
+                        passable, goal_mask, max_cost, ws.dist, ws.parent, ws.done,
+                        ws.touched, count, heap, size, goal,
+                    )
+                    if goal < 0 or accept is None or accept(
+                        np.array(np.unravel_index(goal, self.shape), dtype=np.int64)
+                    ):
+                        break
+        except BaseException:
+            # A test that raised left the buffers dirty, and which voxels it touched is lost
+            # with the search's counts: the thread's next search starts from clean ones.
+            _WORKSPACES.current = None
+            raise
         visited = ws.touched[:count]
         # What every query but the nearest goal's needs, the visited voxels sorted for lookup,
         # is made on the first such query: a planner that asks only for the nearest goal's
@@ -331,8 +337,12 @@ class DistanceField:
     def _lookup(self) -> tuple[IndexArray, npt.NDArray[np.float64], IndexArray]:
         """The visited voxels' flat indices sorted, with their path lengths (m) and parents."""
         order = np.argsort(self._visited, kind="stable")
-        index = self._visited[order]
-        return index, self._visited_dist[order] * self.voxel_size, self._visited_parent[order]
+        lookup = (self._visited[order], self._visited_dist[order] * self.voxel_size,
+                  self._visited_parent[order])
+        # The unsorted arrays are not read again: only the sorted ones are kept.
+        self._visited = self._visited_parent = np.zeros(0, dtype=np.int64)
+        self._visited_dist = np.zeros(0, dtype=np.float64)
+        return lookup
 
     @cached_property
     def dist_m(self) -> npt.NDArray[np.float64]:
