@@ -67,16 +67,22 @@ def _reference(view: MapView, clusters: list[FrontierCluster], offsets_m: npt.ND
     return Viewpoints(np.floor(cand_c[rows]).astype(np.int64), rep_targets[rows], rep_ids[rows])
 
 
+def _blocks_map(make_stack: StackFactory, rng: np.random.Generator, occupied: float) -> MapView:
+    """A 36 x 30 x 16 free map with `occupied` of its voxels occupied and four unknown blocks,
+    so that it has frontiers of several clusters."""
+    shape = (36, 30, 16)
+    state = np.full(shape, VoxelState.FREE, dtype=np.uint8)
+    state[rng.random(shape) < occupied] = VoxelState.OCCUPIED
+    for _ in range(4):
+        lo = rng.integers(0, np.array(shape) - 6)
+        state[tuple(slice(a, a + int(rng.integers(3, 7))) for a in lo)] = VoxelState.UNKNOWN
+    return make_stack(state, 0.1, 0.2).view()
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_viewpoints_match_the_brute_force_reference(make_stack: StackFactory, seed: int) -> None:
     rng = np.random.default_rng(seed)
-    shape = (36, 30, 16)
-    state = np.full(shape, VoxelState.FREE, dtype=np.uint8)
-    state[rng.random(shape) < 0.003] = VoxelState.OCCUPIED
-    for _ in range(4):  # unknown blocks, so that the map has frontiers of several clusters
-        lo = rng.integers(0, np.array(shape) - 6)
-        state[tuple(slice(a, a + int(rng.integers(3, 7))) for a in lo)] = VoxelState.UNKNOWN
-    view = make_stack(state, 0.1, 0.2).view()
+    view = _blocks_map(make_stack, rng, 0.003)
     clusters = view.frontier_clusters(1)
     assert clusters, "the random map has no frontier"
     cfg = ClassicConfig()
@@ -132,13 +138,7 @@ def test_candidates_tested_one_eye_at_a_time_agree_with_all_tested(
     where `all` has none: the search that tests eyes as it reaches them picks what a search
     over every tested viewpoint picks."""
     rng = np.random.default_rng(200 + seed)
-    shape = (36, 30, 16)
-    state = np.full(shape, VoxelState.FREE, dtype=np.uint8)
-    state[rng.random(shape) < 0.006] = VoxelState.OCCUPIED
-    for _ in range(4):
-        lo = rng.integers(0, np.array(shape) - 6)
-        state[tuple(slice(a, a + int(rng.integers(3, 7))) for a in lo)] = VoxelState.UNKNOWN
-    view = make_stack(state, 0.1, 0.2).view()
+    view = _blocks_map(make_stack, rng, 0.006)
     cfg = ClassicConfig()
     offsets = ring_offsets(cfg.view_distances_m, cfg.view_height_offsets_m, cfg.view_directions)
     candidates = ViewpointCandidates(
@@ -203,13 +203,7 @@ def test_the_compiled_search_picks_what_asking_from_python_picks(
     goal, the field and the path that asking `candidates.accepts` from Python finds, from every
     start, with answers remembered between the searches or not."""
     rng = np.random.default_rng(300 + seed)
-    shape = (36, 30, 16)
-    state = np.full(shape, VoxelState.FREE, dtype=np.uint8)
-    state[rng.random(shape) < 0.04] = VoxelState.OCCUPIED
-    for _ in range(4):
-        lo = rng.integers(0, np.array(shape) - 6)
-        state[tuple(slice(a, a + int(rng.integers(3, 7))) for a in lo)] = VoxelState.UNKNOWN
-    view = make_stack(state, 0.1, 0.2).view()
+    view = _blocks_map(make_stack, rng, 0.04)
     cfg = ClassicConfig()
     offsets = ring_offsets(cfg.view_distances_m, cfg.view_height_offsets_m, cfg.view_directions)
 
