@@ -39,16 +39,23 @@ def kernel_package_dirs() -> list[Path]:
     return found
 
 
+def _sources(roots: Iterable[Path]) -> list[tuple[Path, Path]]:
+    """(root, source) for every `*.py` under `roots`, sorted."""
+    return [(root, path) for root in sorted(roots) for path in sorted(root.rglob("*.py"))
+            if "__pycache__" not in path.parts]
+
+
 def sources_digest(roots: Iterable[Path]) -> str:
     """SHA-256 of every `*.py` under `roots`: relative paths and contents, in sorted order."""
+    return _digest(_sources(roots))
+
+
+def _digest(sources: list[tuple[Path, Path]]) -> str:
     digest = hashlib.sha256()
-    for root in sorted(roots):
-        for path in sorted(root.rglob("*.py")):
-            if "__pycache__" in path.parts:
-                continue
-            digest.update(f"{root.name}/{path.relative_to(root).as_posix()}\0".encode())
-            digest.update(path.read_bytes())
-            digest.update(b"\0")
+    for root, path in sources:
+        digest.update(f"{root.name}/{path.relative_to(root).as_posix()}\0".encode())
+        digest.update(path.read_bytes())
+        digest.update(b"\0")
     return digest.hexdigest()
 
 
@@ -63,12 +70,6 @@ def _write_atomically(path: Path, text: str) -> None:
         raise
 
 
-def _source_dirs(roots: Iterable[Path]) -> list[Path]:
-    """Every folder under `roots` (themselves included) that holds Python sources."""
-    return sorted({path.parent for root in roots for path in root.rglob("*.py")
-                   if "__pycache__" not in path.parts})
-
-
 def drop_stale_kernels(roots: list[Path] | None = None) -> int:
     """Drop the cached kernels of the folders under `roots` (default: the kernel packages) whose
     stamp does not name the current sources, and stamp each folder with them (made if need be,
@@ -76,8 +77,10 @@ def drop_stale_kernels(roots: list[Path] | None = None) -> int:
     files were removed."""
     roots = kernel_package_dirs() if roots is None else roots
     try:
-        current = sources_digest(roots)
-        folders = [source / "__pycache__" for source in _source_dirs(roots)]
+        sources = _sources(roots)
+        current = _digest(sources)
+        # Every folder holding sources, the packages' own included.
+        folders = sorted({path.parent / "__pycache__" for _, path in sources})
     except OSError:
         return 0
     removed = 0

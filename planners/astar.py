@@ -57,7 +57,7 @@ def _astar(
     """(K, 3) voxel path start → goal and its length in voxels; (0, 3) and inf if none.
 
     `g`, `parent` and `done` are clean flat workspaces (inf, -1, False), as for
-    `planners.search._dijkstra`; every voxel given a cost is listed in `touched` (returned,
+    `planners.search.resume_search`; every voxel given a cost is listed in `touched` (returned,
     grown when full, with the count) for the caller to clean.
     """
     nx, ny, nz = passable.shape

@@ -105,11 +105,9 @@ def _corner_free(passable: BoolGrid, ci: int, cj: int, ck: int, i: int, j: int, 
 
 
 @numba.njit(cache=True)
-def _dijkstra(
+def resume_search(
     passable: BoolGrid,
     goals: BoolGrid,
-    offsets: IndexArray,
-    step_cost: npt.NDArray[np.float64],
     max_cost: float,
     dist: npt.NDArray[np.float64],
     parent: npt.NDArray[np.int64],
@@ -120,8 +118,9 @@ def _dijkstra(
     size: int,
     expand: int,
 ) -> tuple[int, npt.NDArray[np.int64], int, HeapArray, int]:
-    """Runs a search on until the first popped voxel set in `goals` (returned as a flat index,
-    -1 if none) or until the frontier passes `max_cost`.
+    """Runs a search on, over the 26-neighbourhood, until the first popped voxel set in `goals`
+    (returned as a flat index, -1 if none) or until the frontier passes `max_cost` (voxels).
+    A `CompiledAccept` calls it from its own compiled code.
 
     `dist`, `parent` and `done` are flat workspaces over the grid (inf, -1, False where the search
     has not been); the search writes its results there and lists every voxel it gave a distance
@@ -134,6 +133,7 @@ def _dijkstra(
     nx, ny, nz = passable.shape
     flat_passable = passable.ravel()
     flat_goals = goals.ravel()
+    offsets, step_cost = _OFFSETS, _STEP_COST
     resuming = expand >= 0
     cur = expand
     d = dist[expand] if resuming else 0.0
@@ -180,26 +180,6 @@ def _dijkstra(
                 _heap_push(heap, size, nd, idx)
                 size += 1
     return -1, touched, n_touched, heap, size
-
-
-@numba.njit(cache=True)
-def resume_search(
-    passable: BoolGrid,
-    goals: BoolGrid,
-    max_cost: float,
-    dist: npt.NDArray[np.float64],
-    parent: npt.NDArray[np.int64],
-    done: npt.NDArray[np.bool_],
-    touched: npt.NDArray[np.int64],
-    n_touched: int,
-    heap: HeapArray,
-    size: int,
-    expand: int,
-) -> tuple[int, npt.NDArray[np.int64], int, HeapArray, int]:
-    """`_dijkstra` over the 26-neighbourhood (`max_cost` in voxels): the search a
-    `CompiledAccept` runs on from its own compiled code."""
-    return _dijkstra(passable, goals, _OFFSETS, _STEP_COST, max_cost, dist, parent, done,
-                     touched, n_touched, heap, size, expand)
 
 
 class CompiledAccept(ABC):
